@@ -1,0 +1,483 @@
+//! Reader: a `.vtab` file (path or bytes) → its header, chunk index and, on
+//! demand, the decoded values of single slices or whole arrays.
+//!
+//! Invariant: a [`VtabReader`] only exists for input whose preamble, version,
+//! meta checksum, header rules, chunk index, total length and end marker all
+//! check out; every value it returns comes from a chunk whose CRC, decompressed
+//! length and finiteness were verified. Malformed bytes of any kind yield a
+//! [`ContainerError`]; lengths are checked before anything is allocated.
+
+use std::borrow::Cow;
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+use super::error::ContainerError;
+use super::format::{
+    ArrayValues, ChunkEntry, END_MAGIC, ElementType, Header, PREAMBLE_LEN, Transform, decode_meta, parse_preamble,
+};
+use super::transform::{bytes_f32, bytes_f64, undelta, unshuffle};
+
+/// Largest capacity reserved up front for one decompressed chunk; larger
+/// chunks grow as real data arrives, so a forged length cannot force a huge allocation.
+const MAX_RESERVE: u64 = 16 * 1024 * 1024;
+
+#[derive(Debug)]
+enum Source {
+    File { file: File, path: PathBuf },
+    Bytes(Vec<u8>),
+}
+
+impl Source {
+    fn path(&self) -> Option<&Path> {
+        match self {
+            Source::File { path, .. } => Some(path),
+            Source::Bytes(_) => None,
+        }
+    }
+
+    fn total_len(&self) -> Result<u64, ContainerError> {
+        match self {
+            Source::File { file, path } => {
+                file.metadata().map(|m| m.len()).map_err(|e| ContainerError::io(Some(path), e))
+            }
+            Source::Bytes(b) => Ok(b.len() as u64),
+        }
+    }
+
+    /// Reads `len` bytes at `offset`; the caller has checked the range against `total_len`.
+    fn read_at(&mut self, offset: u64, len: u64) -> Result<Cow<'_, [u8]>, ContainerError> {
+        let end = offset.checked_add(len);
+        match self {
+            Source::Bytes(b) => {
+                let range = usize::try_from(offset).ok().zip(end.and_then(|e| usize::try_from(e).ok()));
+                range
+                    .and_then(|(s, e)| b.get(s..e))
+                    .map(Cow::Borrowed)
+                    .ok_or(ContainerError::Truncated { expected: end.unwrap_or(u64::MAX), found: b.len() as u64 })
+            }
+            Source::File { file, path } => {
+                let n = usize::try_from(len)
+                    .map_err(|_| ContainerError::Truncated { expected: end.unwrap_or(u64::MAX), found: 0 })?;
+                let mut buf = vec![0u8; n];
+                file.seek(SeekFrom::Start(offset))
+                    .and_then(|_| file.read_exact(&mut buf))
+                    .map_err(|e| ContainerError::io(Some(path), e))?;
+                Ok(Cow::Owned(buf))
+            }
+        }
+    }
+}
+
+/// Parsed front matter: header, index, version and where the payload lies.
+struct Front {
+    header: Header,
+    chunks: Vec<ChunkEntry>,
+    version: (u16, u16),
+    payload_start: u64,
+    payload_len: u64,
+}
+
+fn read_front(source: &mut Source, total: u64) -> Result<Front, ContainerError> {
+    let pre = source.read_at(0, total.min(PREAMBLE_LEN))?;
+    let pre = parse_preamble(&pre)?;
+    let payload_start = PREAMBLE_LEN + pre.meta_len; // meta_len ≤ MAX_META_LEN: no overflow
+    if total < payload_start {
+        let expected = payload_start + END_MAGIC.len() as u64;
+        return Err(ContainerError::Truncated { expected, found: total });
+    }
+    let meta = source.read_at(PREAMBLE_LEN, pre.meta_len)?;
+    let (header, chunks, payload_len) = decode_meta(&pre, &meta)?;
+    Ok(Front { header, chunks, version: pre.version, payload_start, payload_len })
+}
+
+/// Summary of a successful [`VtabReader::verify`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct VerifyReport {
+    /// Number of arrays.
+    pub arrays: usize,
+    /// Number of chunks checked.
+    pub chunks: u64,
+    /// Bytes of all decoded elements.
+    pub raw_bytes: u64,
+    /// Bytes of all stored chunks.
+    pub stored_bytes: u64,
+}
+
+impl std::fmt::Display for VerifyReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} arrays, {} chunks, {} bytes raw in {} stored",
+            self.arrays, self.chunks, self.raw_bytes, self.stored_bytes
+        )
+    }
+}
+
+/// Random-access reader of one `.vtab` file.
+#[derive(Debug)]
+pub struct VtabReader {
+    source: Source,
+    header: Header,
+    chunks: Vec<ChunkEntry>,
+    /// Index into `chunks` of each array's first slice.
+    first_chunk: Vec<usize>,
+    version: (u16, u16),
+    payload_start: u64,
+    payload_len: u64,
+}
+
+/// Reads only the preamble and header of a `.vtab` file (no length or payload checks).
+pub fn read_header(path: &Path) -> Result<(Header, (u16, u16)), ContainerError> {
+    let file = File::open(path).map_err(|e| ContainerError::io(Some(path), e))?;
+    let mut source = Source::File { file, path: path.to_path_buf() };
+    let total = source.total_len()?;
+    let front = read_front(&mut source, total)?;
+    Ok((front.header, front.version))
+}
+
+impl VtabReader {
+    /// Opens a file, reading only its preamble, header and end marker.
+    pub fn open(path: &Path) -> Result<Self, ContainerError> {
+        let file = File::open(path).map_err(|e| ContainerError::io(Some(path), e))?;
+        Self::init(Source::File { file, path: path.to_path_buf() })
+    }
+
+    /// Reads a `.vtab` file held in memory.
+    pub fn from_bytes(bytes: Vec<u8>) -> Result<Self, ContainerError> {
+        Self::init(Source::Bytes(bytes))
+    }
+
+    fn init(mut source: Source) -> Result<Self, ContainerError> {
+        let total = source.total_len()?;
+        let front = read_front(&mut source, total)?;
+        let expected = front
+            .payload_start
+            .checked_add(front.payload_len)
+            .and_then(|n| n.checked_add(END_MAGIC.len() as u64))
+            .ok_or_else(|| ContainerError::InvalidHeader("payload length overflows".into()))?;
+        if total < expected {
+            return Err(ContainerError::Truncated { expected, found: total });
+        }
+        if total > expected {
+            return Err(ContainerError::TrailingBytes { extra: total - expected });
+        }
+        let mut first_chunk = Vec::with_capacity(front.header.arrays.len());
+        let mut next = 0usize;
+        for desc in &front.header.arrays {
+            first_chunk.push(next);
+            // validate_index proved the slice counts sum to chunks.len().
+            next = next.saturating_add(usize::try_from(desc.slice_count()).unwrap_or(usize::MAX));
+        }
+        let mut reader = VtabReader {
+            source,
+            header: front.header,
+            chunks: front.chunks,
+            first_chunk,
+            version: front.version,
+            payload_start: front.payload_start,
+            payload_len: front.payload_len,
+        };
+        reader.check_end_magic()?;
+        Ok(reader)
+    }
+
+    fn check_end_magic(&mut self) -> Result<(), ContainerError> {
+        let at = self.payload_start + self.payload_len; // checked in init
+        let tail = self.source.read_at(at, END_MAGIC.len() as u64)?;
+        if *tail != END_MAGIC { Err(ContainerError::BadEndMagic) } else { Ok(()) }
+    }
+
+    /// The table header.
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// Format version `(major, minor)` found in the file.
+    pub fn version(&self) -> (u16, u16) {
+        self.version
+    }
+
+    /// The chunk index, array-major and slice-ascending.
+    pub fn chunks(&self) -> &[ChunkEntry] {
+        &self.chunks
+    }
+
+    /// Index of the array called `name`, if any.
+    pub fn find_array(&self, name: &str) -> Option<usize> {
+        self.header.arrays.iter().position(|a| a.name == name)
+    }
+
+    /// Reads, checks and decodes one slice (one index of the outermost axis) of an array.
+    pub fn read_slice(&mut self, array: usize, slice: u64) -> Result<ArrayValues, ContainerError> {
+        let count = self.header.arrays.len();
+        let desc = self.header.arrays.get(array).ok_or(ContainerError::NoSuchArray { index: array, count })?;
+        let name = || desc.name.clone();
+        if slice >= desc.slice_count() {
+            return Err(ContainerError::NoSuchSlice { array: name(), slice, count: desc.slice_count() });
+        }
+        let entry = usize::try_from(slice)
+            .ok()
+            .and_then(|s| self.first_chunk.get(array).and_then(|f| f.checked_add(s)))
+            .and_then(|i| self.chunks.get(i))
+            .ok_or_else(|| ContainerError::InvalidHeader(format!("no index entry for {array}/{slice}")))?;
+        let offset = self
+            .payload_start
+            .checked_add(entry.offset)
+            .ok_or_else(|| ContainerError::InvalidHeader("chunk offset overflows".into()))?;
+        let stored = self.source.read_at(offset, entry.stored_len)?;
+        if crc32fast::hash(&stored) != entry.crc32 {
+            return Err(ContainerError::ChunkChecksum { array: name(), slice });
+        }
+        let raw =
+            match entry.transform {
+                Transform::None => stored.into_owned(),
+                Transform::Shuffle | Transform::DeltaShuffle => {
+                    let decompressed = decompress(&stored, entry.raw_len).map_err(|e| {
+                        ContainerError::ChunkDecompress { array: name(), slice, message: e.to_string() }
+                    })?;
+                    if decompressed.len() as u64 != entry.raw_len {
+                        return Err(ContainerError::ChunkLength {
+                            array: name(),
+                            slice,
+                            expected: entry.raw_len,
+                            found: decompressed.len() as u64,
+                        });
+                    }
+                    let plain = unshuffle(&decompressed, desc.element);
+                    if entry.transform == Transform::DeltaShuffle {
+                        let row_len = usize::try_from(desc.row_len()).unwrap_or(usize::MAX);
+                        undelta(&plain, desc.element, row_len)
+                    } else {
+                        plain
+                    }
+                }
+            };
+        let values = match desc.element {
+            ElementType::F32 => ArrayValues::F32(bytes_f32(&raw)),
+            ElementType::F64 => ArrayValues::F64(bytes_f64(&raw)),
+        };
+        let bad = values.to_f64().into_iter().enumerate().find(|(_, v)| !v.is_finite());
+        if let Some((i, value)) = bad {
+            let base = slice.saturating_mul(desc.slice_len().unwrap_or(0));
+            return Err(ContainerError::NonFinite { array: name(), index: base.saturating_add(i as u64), value });
+        }
+        Ok(values)
+    }
+
+    /// Reads and decodes a whole array (all slices, in order).
+    pub fn read_array(&mut self, array: usize) -> Result<ArrayValues, ContainerError> {
+        let count = self.header.arrays.len();
+        let desc = self.header.arrays.get(array).ok_or(ContainerError::NoSuchArray { index: array, count })?;
+        let slices = desc.slice_count();
+        let mut out = match desc.element {
+            ElementType::F32 => ArrayValues::F32(Vec::new()),
+            ElementType::F64 => ArrayValues::F64(Vec::new()),
+        };
+        for slice in 0..slices {
+            match (&mut out, self.read_slice(array, slice)?) {
+                (ArrayValues::F32(all), ArrayValues::F32(part)) => all.extend(part),
+                (ArrayValues::F64(all), ArrayValues::F64(part)) => all.extend(part),
+                _ => {
+                    return Err(ContainerError::InvalidHeader("element type changed between slices".into()));
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Checks every chunk (CRC, decompression, length, finite values), the
+    /// file length and the end marker.
+    pub fn verify(&mut self) -> Result<VerifyReport, ContainerError> {
+        let expected = self.payload_start + self.payload_len + END_MAGIC.len() as u64; // checked in init
+        let total = self.source.total_len()?;
+        if total < expected {
+            return Err(ContainerError::Truncated { expected, found: total });
+        }
+        if total > expected {
+            return Err(ContainerError::TrailingBytes { extra: total - expected });
+        }
+        for array in 0..self.header.arrays.len() {
+            for slice in 0..self.header.arrays.get(array).map_or(0, |d| d.slice_count()) {
+                self.read_slice(array, slice)?;
+            }
+        }
+        self.check_end_magic()?;
+        Ok(VerifyReport {
+            arrays: self.header.arrays.len(),
+            chunks: self.chunks.len() as u64,
+            raw_bytes: self.chunks.iter().fold(0u64, |acc, c| acc.saturating_add(c.raw_len)),
+            stored_bytes: self.payload_len,
+        })
+    }
+
+    /// The path this reader was opened from, if any.
+    pub fn path(&self) -> Option<&Path> {
+        self.source.path()
+    }
+}
+
+/// Decompresses one zstd chunk, stopping one byte past `raw_len` so a forged
+/// or corrupt stream cannot grow the output beyond what the index promises.
+fn decompress(stored: &[u8], raw_len: u64) -> std::io::Result<Vec<u8>> {
+    let decoder = zstd::stream::read::Decoder::with_buffer(stored)?;
+    let mut out = Vec::with_capacity(usize::try_from(raw_len.min(MAX_RESERVE)).unwrap_or(0));
+    decoder.take(raw_len.saturating_add(1)).read_to_end(&mut out)?;
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::container::encode::{EncodeOptions, encode};
+    use crate::container::format::{Axis, FORMAT_MAJOR, FORMAT_MINOR, MAX_META_LEN};
+    use crate::container::testutil::{desc, header, small_table, temp_path};
+
+    fn small_bytes() -> Vec<u8> {
+        let (h, arrays) = small_table();
+        encode(&h, &arrays, &EncodeOptions::default()).expect("encode").bytes
+    }
+
+    fn bits(v: &ArrayValues) -> Vec<u64> {
+        match v {
+            ArrayValues::F32(v) => v.iter().map(|x| u64::from(x.to_bits())).collect(),
+            ArrayValues::F64(v) => v.iter().map(|x| x.to_bits()).collect(),
+        }
+    }
+
+    fn slice_of(v: &ArrayValues, start: usize, len: usize) -> ArrayValues {
+        match v {
+            ArrayValues::F32(v) => ArrayValues::F32(v[start..start + len].to_vec()),
+            ArrayValues::F64(v) => ArrayValues::F64(v[start..start + len].to_vec()),
+        }
+    }
+
+    /// A table exercising all three transforms: a smooth f64 3-D array
+    /// (DeltaShuffle), a f32 array of randomly chosen small integers (Shuffle)
+    /// and a tiny noisy f32 array (None).
+    fn mixed_table() -> (crate::container::format::Header, Vec<ArrayValues>) {
+        let h = header(vec![
+            desc(
+                "smooth",
+                ElementType::F64,
+                vec![
+                    Axis::linear("a", "", 0.0, 1.0, 4),
+                    Axis::log("b", "", 1.0, 100.0, 8),
+                    Axis::linear("c", "", 0.0, 1.0, 256),
+                ],
+            ),
+            desc(
+                "levels",
+                ElementType::F32,
+                vec![Axis::linear("i", "", 0.0, 1.0, 2), Axis::linear("j", "", 0.0, 1.0, 512)],
+            ),
+            desc(
+                "tiny",
+                ElementType::F32,
+                vec![Axis::linear("k", "", 0.0, 1.0, 3), Axis::linear("l", "", 0.0, 1.0, 2)],
+            ),
+        ]);
+        let smooth =
+            (0..4 * 8 * 256).map(|n| ((n / 256) as f64 * 0.3).exp() * ((n % 256) as f64 / 40.0).sin()).collect();
+        let noise = crate::container::testutil::noise(1024, 5);
+        let levels = noise.iter().map(|b| (b % 4) as f32).collect();
+        let tiny = noise.iter().take(6).map(|b| f32::from_bits((*b as u32 >> 9) | 0x3F80_0000)).collect();
+        (h, vec![ArrayValues::F64(smooth), ArrayValues::F32(levels), ArrayValues::F32(tiny)])
+    }
+
+    #[test]
+    fn round_trip_is_bit_exact_for_every_slice_shape_and_transform() {
+        for (h, arrays) in [small_table(), mixed_table()] {
+            let enc = encode(&h, &arrays, &EncodeOptions::default()).expect("encode");
+            let path = temp_path(&format!("roundtrip-{}", h.arrays[0].name));
+            std::fs::write(&path, &enc.bytes).expect("write");
+            let from_file = VtabReader::open(&path);
+            let (h2, version) = read_header(&path).expect("read_header");
+            let _ = std::fs::remove_file(&path);
+            assert_eq!((h2, version), (h.clone(), (FORMAT_MAJOR, FORMAT_MINOR)));
+            for mut r in [from_file.expect("open"), VtabReader::from_bytes(enc.bytes.clone()).expect("from_bytes")] {
+                assert_eq!(r.header(), &h);
+                assert_eq!(r.version(), (1, 0));
+                let total_slices: u64 = h.arrays.iter().map(|d| d.slice_count()).sum();
+                assert_eq!(r.chunks().len() as u64, total_slices);
+                for (ai, (desc, values)) in h.arrays.iter().zip(&arrays).enumerate() {
+                    let whole = r.read_array(ai).expect("read_array");
+                    assert_eq!(bits(&whole), bits(values), "array {}", desc.name);
+                    let n = desc.slice_len().expect("small") as usize;
+                    // Read slices in reverse to show each read is independent.
+                    for s in (0..desc.slice_count()).rev() {
+                        let got = r.read_slice(ai, s).expect("read_slice");
+                        assert_eq!(bits(&got), bits(&slice_of(values, s as usize * n, n)), "{}/{s}", desc.name);
+                    }
+                }
+                let rep = r.verify().expect("verify");
+                assert_eq!(rep.chunks, total_slices);
+            }
+        }
+        let (h, arrays) = mixed_table();
+        let enc = encode(&h, &arrays, &EncodeOptions::default()).expect("encode");
+        let r = VtabReader::from_bytes(enc.bytes).expect("open");
+        let used: Vec<Transform> = r.chunks().iter().map(|c| c.transform).collect();
+        assert!(used[..4].iter().all(|t| *t == Transform::DeltaShuffle), "{used:?}");
+        assert!(used[4..6].iter().all(|t| *t == Transform::Shuffle), "{used:?}");
+        assert!(used[6..].iter().all(|t| *t == Transform::None), "{used:?}");
+    }
+
+    #[test]
+    fn version_policy() {
+        let bytes = small_bytes();
+        let with_version = |major: u16, minor: u16| {
+            let mut f = bytes.clone();
+            f[8..10].copy_from_slice(&major.to_le_bytes());
+            f[10..12].copy_from_slice(&minor.to_le_bytes());
+            VtabReader::from_bytes(f)
+        };
+        let e = with_version(2, 0).expect_err("newer major");
+        assert!(matches!(e, ContainerError::NewerMajor { found: (2, 0), supported: (1, 0) }), "{e:?}");
+        let msg = e.to_string();
+        assert!(msg.contains("2.0") && msg.contains("1.0") && msg.contains("upgrade voltab"), "{msg}");
+        let e = with_version(1, 1).expect_err("newer minor");
+        assert!(matches!(e, ContainerError::NewerMinor { found: (1, 1), supported: (1, 0) }), "{e:?}");
+        assert!(e.to_string().contains("1.1") && e.to_string().contains("1.0"));
+        let e = with_version(0, 7).expect_err("old major");
+        assert!(matches!(e, ContainerError::UnsupportedOld { found: (0, 7), .. }), "{e:?}");
+    }
+
+    #[test]
+    fn framing_errors_are_typed() {
+        let bytes = small_bytes();
+        let mut f = bytes.clone();
+        f.extend_from_slice(b"xyz");
+        assert!(matches!(VtabReader::from_bytes(f), Err(ContainerError::TrailingBytes { extra: 3 })));
+        let mut f = bytes.clone();
+        f[0] = b'X';
+        let e = VtabReader::from_bytes(f).expect_err("bad magic");
+        assert!(matches!(e, ContainerError::BadMagic) && e.to_string().contains("not a .vtab file"));
+        assert!(matches!(VtabReader::from_bytes(b"PK\x03\x04".to_vec()), Err(ContainerError::BadMagic)));
+        let mut f = bytes.clone();
+        f[12..20].copy_from_slice(&(1u64 << 40).to_le_bytes());
+        let e = VtabReader::from_bytes(f);
+        assert!(matches!(e, Err(ContainerError::HeaderTooLarge { len, max: MAX_META_LEN }) if len == 1 << 40), "{e:?}");
+        let mut f = bytes.clone();
+        f[30] ^= 0x10;
+        assert!(matches!(VtabReader::from_bytes(f), Err(ContainerError::HeaderChecksum { .. })));
+        let mut f = bytes.clone();
+        let n = f.len();
+        f[n - 3] = b'?';
+        assert!(matches!(VtabReader::from_bytes(f), Err(ContainerError::BadEndMagic)));
+        let missing = temp_path("does-not-exist");
+        let e = VtabReader::open(&missing).expect_err("missing file");
+        assert!(matches!(&e, ContainerError::Io { path: Some(p), .. } if *p == missing));
+        assert!(e.to_string().contains("does-not-exist"));
+    }
+
+    #[test]
+    fn out_of_range_requests_are_typed() {
+        let mut r = VtabReader::from_bytes(small_bytes()).expect("open");
+        assert!(matches!(r.read_slice(3, 0), Err(ContainerError::NoSuchArray { index: 3, count: 3 })));
+        assert!(matches!(r.read_array(9), Err(ContainerError::NoSuchArray { index: 9, count: 3 })));
+        let e = r.read_slice(1, 6);
+        assert!(matches!(&e, Err(ContainerError::NoSuchSlice { array, slice: 6, count: 6 }) if array == "b"), "{e:?}");
+        assert_eq!(r.find_array("c"), Some(2));
+    }
+}
