@@ -1,0 +1,5 @@
+//! Physics shared by every table kind and stage: phase functions, random streams.
+//! One home per concept: no table kind carries its own copy of a phase function.
+
+pub mod hg;
+pub mod rng;
