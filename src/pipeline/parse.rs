@@ -1,0 +1,261 @@
+//! Reading pipeline files: RON text → [`PipelineFile`] per file, following `include`s.
+//!
+//! Input: a path (on disk, or in the embedded default set). Output: [`Loaded`] — every file's
+//! entries tagged with the file they came from, included files first.
+//! Invariant: syntax, type and unknown-field errors leave here with `file:line:column` and a hint.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::error::{Diagnostic, DiagnosticKind as K, Loc, PipelineError, suggestion_help};
+use super::locate::Masked;
+use crate::stages::StageDecl;
+use crate::tables::TableDecl;
+
+/// One pipeline file as written.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PipelineFile {
+    /// Other pipeline files (paths relative to this file) whose presets, tables and stages are
+    /// loaded first, e.g. a studio-wide base pipeline.
+    #[serde(default)]
+    pub include: Vec<String>,
+    /// Named partial table definitions that tables start from with `preset: "name"`.
+    #[serde(default)]
+    pub presets: BTreeMap<String, TableDecl>,
+    /// The tables to compile. Each needs a unique `id`.
+    #[serde(default)]
+    pub tables: Vec<TableDecl>,
+    /// Field overrides for tables declared in included files, by table id.
+    #[serde(default)]
+    pub overrides: BTreeMap<String, TableDecl>,
+    /// Consumers of the tables (run after compiling by `voltab run`).
+    #[serde(default)]
+    pub stages: Vec<StageDecl>,
+}
+
+/// A source file kept for locating errors.
+#[derive(Debug)]
+pub struct SourceFile {
+    /// Path as shown to the user.
+    pub path: PathBuf,
+    /// Searchable text.
+    pub masked: Masked,
+}
+
+impl SourceFile {
+    /// Location of a byte offset.
+    pub fn loc(&self, offset: usize) -> Loc {
+        let (line, col) = self.masked.line_col(offset);
+        Loc { file: self.path.clone(), line, col }
+    }
+}
+
+/// Where pipeline text comes from.
+pub trait Sources {
+    /// Reads a file.
+    fn read(&self, path: &Path) -> std::io::Result<String>;
+}
+
+/// Files on disk.
+pub struct Disk;
+
+impl Sources for Disk {
+    fn read(&self, path: &Path) -> std::io::Result<String> {
+        std::fs::read_to_string(path)
+    }
+}
+
+/// The pipelines compiled into the binary (used when `voltab` runs without arguments outside a
+/// checkout, so the README's main command works from anywhere).
+pub struct Embedded;
+
+/// (path, text) of the embedded pipelines.
+pub const EMBEDDED: &[(&str, &str)] = &[
+    ("pipelines/default.ron", include_str!("../../pipelines/default.ron")),
+    ("pipelines/studio-base.ron", include_str!("../../pipelines/studio-base.ron")),
+];
+
+impl Sources for Embedded {
+    fn read(&self, path: &Path) -> std::io::Result<String> {
+        let norm = normalize(path);
+        EMBEDDED
+            .iter()
+            .find(|(p, _)| Path::new(p) == norm)
+            .map(|(_, t)| (*t).to_owned())
+            .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "not an embedded pipeline"))
+    }
+}
+
+/// Lexically normalises `a/./b/../c` to `a/c` (no file system access).
+pub fn normalize(p: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for c in p.components() {
+        match c {
+            std::path::Component::CurDir => {}
+            std::path::Component::ParentDir => {
+                if !out.pop() {
+                    out.push("..");
+                }
+            }
+            other => out.push(other),
+        }
+    }
+    out
+}
+
+/// All entries of a pipeline and its includes, each tagged with its file index.
+#[derive(Debug, Default)]
+pub struct Loaded {
+    /// Source files, in load order.
+    pub files: Vec<SourceFile>,
+    /// (name, decl, file).
+    pub presets: Vec<(String, TableDecl, usize)>,
+    /// (decl, file).
+    pub tables: Vec<(TableDecl, usize)>,
+    /// (table id, decl, file).
+    pub overrides: Vec<(String, TableDecl, usize)>,
+    /// (decl, file).
+    pub stages: Vec<(StageDecl, usize)>,
+}
+
+fn ron_options() -> ron::Options {
+    ron::Options::default().with_default_extension(
+        ron::extensions::Extensions::IMPLICIT_SOME | ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES,
+    )
+}
+
+/// Loads `path` and everything it includes.
+pub fn load(path: &Path, sources: &dyn Sources) -> Result<Loaded, PipelineError> {
+    let mut loaded = Loaded::default();
+    let mut stack = Vec::new();
+    load_into(&normalize(path), None, sources, &mut loaded, &mut stack)?;
+    Ok(loaded)
+}
+
+fn load_into(
+    path: &Path,
+    included_from: Option<Loc>,
+    sources: &dyn Sources,
+    out: &mut Loaded,
+    stack: &mut Vec<PathBuf>,
+) -> Result<(), PipelineError> {
+    if stack.iter().any(|p| p == path) {
+        let chain: Vec<String> =
+            stack.iter().chain(std::iter::once(&path.to_path_buf())).map(|p| p.display().to_string()).collect();
+        return Err(PipelineError::one(
+            Diagnostic::new(K::Cycle, included_from, format!("include cycle: {}", chain.join(" → ")))
+                .with_help("remove one of the includes so the files form a tree"),
+        ));
+    }
+    if out.files.iter().any(|f| f.path == path) {
+        return Ok(()); // already loaded through another include (diamond): load once
+    }
+    let text = sources.read(path).map_err(|e| {
+        let what = if included_from.is_some() { "included pipeline" } else { "pipeline" };
+        PipelineError::one(
+            Diagnostic::new(K::Io, included_from.clone(), format!("cannot read {what} {}: {e}", path.display()))
+                .with_help("check the path (includes are relative to the including file) and its permissions"),
+        )
+    })?;
+    let file: PipelineFile =
+        ron_options().from_str(&text).map_err(|e| PipelineError::one(ron_diagnostic(path, &text, &e)))?;
+    let masked = Masked::new(&text);
+    let this = SourceFile { path: path.to_path_buf(), masked };
+    stack.push(path.to_path_buf());
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    for inc in &file.include {
+        let at = this.masked.find_string(inc, 0).map(|o| this.loc(o));
+        load_into(&normalize(&dir.join(inc)), at, sources, out, stack)?;
+    }
+    stack.pop();
+    let idx = out.files.len();
+    out.files.push(this);
+    out.presets.extend(file.presets.into_iter().map(|(n, d)| (n, d, idx)));
+    out.tables.extend(file.tables.into_iter().map(|d| (d, idx)));
+    out.overrides.extend(file.overrides.into_iter().map(|(n, d)| (n, d, idx)));
+    out.stages.extend(file.stages.into_iter().map(|d| (d, idx)));
+    Ok(())
+}
+
+/// Turns a RON error into a diagnostic with a location and a hint.
+fn ron_diagnostic(path: &Path, text: &str, e: &ron::error::SpannedError) -> Diagnostic {
+    use ron::error::Error as E;
+    let loc = Some(Loc { file: path.to_path_buf(), line: e.span.start.line, col: e.span.start.col });
+    match &e.code {
+        E::NoSuchStructField { expected, found, outer } => {
+            let names: Vec<&str> = expected.to_vec();
+            let ctx = outer.as_deref().map(describe_outer).unwrap_or_default();
+            Diagnostic::new(K::UnknownField, loc, format!("unknown field `{found}`{ctx}"))
+                .with_help(suggestion_help(found, &names, "field"))
+        }
+        E::NoSuchEnumVariant { expected, found, outer } => {
+            let names: Vec<&str> = expected.to_vec();
+            let (kind, what) = match outer.as_deref() {
+                Some("TableDecl") => (K::UnknownKind, "table kind"),
+                Some("StageDecl") => (K::UnknownKind, "stage kind"),
+                _ => (K::WrongType, "value"),
+            };
+            Diagnostic::new(kind, loc, format!("unknown {what} `{found}`"))
+                .with_help(suggestion_help(found, &names, what))
+        }
+        E::MissingStructField { field, outer } => {
+            let ctx = outer.as_deref().map(describe_outer).unwrap_or_default();
+            Diagnostic::new(K::MissingField, loc, format!("missing field `{field}`{ctx}"))
+        }
+        E::DuplicateStructField { field, .. } => {
+            Diagnostic::new(K::DuplicateId, loc, format!("field `{field}` is given twice"))
+                .with_help("keep one of them")
+        }
+        E::InvalidValueForType { expected, found } => {
+            let mut d = Diagnostic::new(K::WrongType, loc, format!("expected {expected}, found {found}"));
+            if expected.contains("u32") || expected.contains("u8") || expected.contains("i32") {
+                d = d.with_help("this field takes a whole number in the range given in schemas/reference.md");
+            }
+            d
+        }
+        E::Message(m) if m.contains("untagged enum GValues") => {
+            Diagnostic::new(K::WrongType, loc, "g must be a list or a grid")
+                .with_help("write g as a list `[-0.5, 0.0, 0.5]` or a grid `(min: -0.9, max: 0.9, count: 19)`")
+        }
+        E::ExpectedInteger
+        | E::ExpectedFloat
+        | E::ExpectedString
+        | E::ExpectedBoolean
+        | E::ExpectedArray
+        | E::ExpectedMap
+        | E::ExpectedStructLike
+        | E::ExpectedUnit
+        | E::ExpectedChar
+        | E::ExpectedIdentifier => Diagnostic::new(K::WrongType, loc, format!("wrong type of value: {}", e.code))
+            .with_help("see schemas/reference.md for each field's type and valid range"),
+        E::IntegerOutOfBounds => {
+            let token = span_text(text, e);
+            Diagnostic::new(K::WrongType, loc, format!("`{token}` does not fit this field's integer type"))
+                .with_help("this field takes a non-negative whole number; see schemas/reference.md for its valid range")
+        }
+        other => Diagnostic::new(K::Syntax, loc, format!("invalid RON: {other}"))
+            .with_help("see pipelines/default.ron for the layout of a pipeline file"),
+    }
+}
+
+/// The source text an error's span covers (on its first line).
+fn span_text(text: &str, e: &ron::error::SpannedError) -> String {
+    let line = text.lines().nth(e.span.start.line.saturating_sub(1)).unwrap_or("");
+    let mut start = e.span.start.col.saturating_sub(1);
+    // ron's span of a negative literal starts after the sign.
+    if start > 0 && line.chars().nth(start - 1) == Some('-') {
+        start -= 1;
+    }
+    let end = if e.span.end.line == e.span.start.line { e.span.end.col.saturating_sub(1) } else { usize::MAX };
+    line.chars().skip(start).take(end.saturating_sub(start)).collect::<String>().trim().to_owned()
+}
+
+fn describe_outer(outer: &str) -> String {
+    match outer {
+        "PipelineFile" => " at the top level of the pipeline".to_owned(),
+        o => format!(" in a {} entry", o.trim_end_matches("Raw")),
+    }
+}

@@ -1,0 +1,97 @@
+//! The pipeline language's schema: a JSON Schema generated from the Rust types (with each field's
+//! default, unit and valid range added from its `declare_params!` declaration) and a Markdown
+//! reference page for people. Both are committed under `schemas/`; a test fails when they no longer
+//! match the code (`voltab schema --write` regenerates them).
+
+use serde_json::{Value, json};
+
+use super::params::FieldDoc;
+use super::parse::PipelineFile;
+use crate::stages::plot_phase::{PlotPhase, PlotPhaseRaw};
+use crate::tables::phase_hg::{PhaseHg, PhaseHgRaw};
+
+/// (kind, what it is, fields, defaults) of one kind.
+type KindDoc = (&'static str, &'static str, &'static [FieldDoc], Vec<(&'static str, Value)>);
+
+/// Every table kind.
+fn table_kinds() -> Vec<KindDoc> {
+    vec![(
+        PhaseHgRaw::KIND,
+        "Henyey-Greenstein phase tables: phase value f(mu,g), per-azimuth cumulative F_hg (elek2014), inverse CDF mu(xi,g), ZH and Legendre coefficients; one chunk per g.",
+        PhaseHgRaw::FIELDS,
+        PhaseHg::defaults_json(),
+    )]
+}
+
+/// Same for stage kinds.
+fn stage_kinds() -> Vec<KindDoc> {
+    vec![(
+        PlotPhaseRaw::KIND,
+        "Plots a PhaseHg table's phase functions (log scale over angle) to a PNG, loading only the g slices it plots.",
+        PlotPhaseRaw::FIELDS,
+        PlotPhase::defaults_json(),
+    )]
+}
+
+/// JSON Schema of a pipeline file.
+pub fn json_schema() -> Value {
+    let mut schema = serde_json::to_value(schemars::schema_for!(PipelineFile)).unwrap_or(Value::Null);
+    schema["title"] = json!("voltab pipeline");
+    schema["description"] =
+        json!("A voltab pipeline file (RON). Generated from the Rust types by `voltab schema --write`; do not edit.");
+    for (kind, _, fields, defaults) in table_kinds().into_iter().chain(stage_kinds()) {
+        let def_name = format!("{kind}Raw");
+        let Some(props) =
+            schema.get_mut("$defs").and_then(|d| d.get_mut(&def_name)).and_then(|d| d.get_mut("properties"))
+        else {
+            continue;
+        };
+        for f in fields {
+            if let Some(p) = props.get_mut(f.name) {
+                if let Some((_, d)) = defaults.iter().find(|(n, _)| *n == f.name) {
+                    p["default"] = d.clone();
+                }
+                p["x-unit"] = json!(f.unit);
+                p["x-range"] = json!(f.range);
+            }
+        }
+    }
+    schema
+}
+
+/// The human reference page.
+pub fn reference_markdown() -> String {
+    let mut s = String::new();
+    s.push_str("# voltab pipeline reference\n\n");
+    s.push_str("Generated from the code by `voltab schema --write`; a test fails when it is out of date. ");
+    s.push_str("Machine-readable form: `pipeline.schema.json` (JSON Schema) beside this file.\n\n");
+    s.push_str("## File layout\n\n```ron\n(\n    include: [\"studio-base.ron\"],              // optional: loaded first (paths relative to this file)\n    presets: { \"fine\": PhaseHg(mu_bins: 4096) }, // optional: partial definitions\n    tables: [\n        PhaseHg(id: \"hg\", preset: \"fine\", g: [-0.5, 0.0, 0.5]),\n    ],\n    overrides: { \"studio_hg\": PhaseHg(zh_order: 64) }, // optional: change fields of included tables\n    stages: [ PlotPhase(id: \"hg_plot\", table: \"hg\") ],\n)\n```\n\n");
+    s.push_str("- Every field of a table or stage may be omitted: it then takes the value of its `preset` (presets may chain), else the default below.\n");
+    s.push_str("- `id` is required in `tables` and `stages`, unique, and used as the output file name (letters, digits, `_`, `-`, `.`).\n");
+    s.push_str("- Unknown fields, unknown kinds, wrong types, out-of-range values, duplicate ids and dangling preset/override/table references are errors with `file:line:column` and a hint.\n\n");
+    s.push_str("## Physical conventions\n\n");
+    s.push_str("- Phase functions are normalised over the sphere: the integral of f over all directions is 1 (unit 1/sr). mu = cos(theta) is the cosine between the incident propagation direction and the scattered direction; g is the mean cosine.\n");
+    s.push_str("- F_hg(mu, g) (elek2014) is the cumulative per unit azimuth, 1/rad: 2 pi F_hg(mu, g) is the probability that the scattering cosine is at most mu.\n");
+    s.push_str("- ZH coefficients use real-SH normalisation y_l^0 = sqrt((2l+1)/(4 pi)) P_l: the HG lobe's coefficients are sqrt((2l+1)/(4 pi)) g^l.\n\n");
+    for (title, kinds) in [("Table kinds", table_kinds()), ("Stage kinds", stage_kinds())] {
+        s.push_str(&format!("## {title}\n\n"));
+        for (kind, about, fields, defaults) in kinds {
+            s.push_str(&format!("### `{kind}`\n\n{about}\n\n| field | type | default | unit | valid range | meaning |\n|---|---|---|---|---|---|\n"));
+            for f in fields {
+                let d = defaults.iter().find(|(n, _)| *n == f.name).map_or_else(String::new, |(_, v)| v.to_string());
+                let doc = f.doc.split_whitespace().collect::<Vec<_>>().join(" ");
+                s.push_str(&format!(
+                    "| `{}` | `{}` | `{}` | {} | {} | {} |\n",
+                    f.name,
+                    f.ty.replace(' ', ""),
+                    d,
+                    f.unit,
+                    f.range.replace('|', "\\|"),
+                    doc.replace('|', "\\|")
+                ));
+            }
+            s.push('\n');
+        }
+    }
+    s
+}
