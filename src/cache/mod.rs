@@ -1,0 +1,206 @@
+//! The output folder as a content-addressed cache.
+//!
+//! Input: a table's content key and encoded bytes. Output: `<out>/<id>.vtab` plus its JSON sidecar,
+//! backed by `<out>/.voltab-cache/<key>.vtab` so reverting a definition restores instantly.
+//! Invariants:
+//! - keys are hashes of (canonical definition, kind schema version, generator version, container
+//!   major) — never paths or modification times;
+//! - every file appears atomically (temp file in the same folder, fsync, rename): a run killed at any
+//!   moment leaves either the old file or the new one, never a partial one; leftover temp files are
+//!   removed by the next run;
+//! - one run at a time per folder (an exclusive lock on `<out>/.voltab.lock`); a second run waits;
+//! - an existing file counts as up to date only if its header carries the key *and* every chunk
+//!   verifies, so a corrupted output is rebuilt rather than trusted (no poisoned cache).
+
+use std::fs::{self, File};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::container::{FORMAT_MAJOR, VtabReader};
+use crate::tables::TableDef;
+
+/// Prefix of temporary files (removed on the next run if a run was killed).
+const TMP_PREFIX: &str = ".tmp-voltab-";
+/// Cache sub-folder.
+pub const CACHE_DIR: &str = ".voltab-cache";
+
+/// Content key of a table definition.
+pub fn content_key(def: &TableDef) -> [u8; 32] {
+    let mut h = blake3::Hasher::new();
+    h.update(b"voltab content key v1\0");
+    h.update(def.kind().as_bytes());
+    h.update(b"\0");
+    h.update(&def.kind_schema_version().to_le_bytes());
+    h.update(def.generator_version().as_bytes());
+    h.update(b"\0");
+    h.update(&FORMAT_MAJOR.to_le_bytes());
+    h.update(def.canonical_ron().as_bytes());
+    *h.finalize().as_bytes()
+}
+
+/// Lower-case hex of a key.
+pub fn hex(key: &[u8; 32]) -> String {
+    key.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Problems with the output folder.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CacheError {
+    /// The folder cannot be created or written.
+    #[error(
+        "output folder {path} is not usable: {source}\n  = help: choose a writable folder with --out DIR, or fix its permissions"
+    )]
+    NotWritable {
+        /// Folder.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A file operation failed.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+}
+
+/// An output folder, locked for this run.
+#[derive(Debug)]
+pub struct OutputDir {
+    dir: PathBuf,
+    _lock: File,
+    /// Stale temporary files removed when the folder was opened (from killed runs).
+    pub stale_removed: usize,
+}
+
+impl OutputDir {
+    /// Creates (if needed) and locks `dir`; `waiting` is called once if another run holds the lock.
+    pub fn open(dir: &Path, waiting: impl FnOnce()) -> Result<Self, CacheError> {
+        let not_writable = |source| CacheError::NotWritable { path: dir.to_path_buf(), source };
+        fs::create_dir_all(dir.join(CACHE_DIR)).map_err(not_writable)?;
+        let lock = fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(dir.join(".voltab.lock"))
+            .map_err(not_writable)?;
+        match lock.try_lock() {
+            Ok(()) => {}
+            Err(fs::TryLockError::WouldBlock) => {
+                waiting();
+                lock.lock().map_err(not_writable)?;
+            }
+            Err(fs::TryLockError::Error(e)) => return Err(not_writable(e)),
+        }
+        // Probe that we can really create files here (a read-only mount passes create_dir_all).
+        let probe = tempfile::Builder::new().prefix(TMP_PREFIX).tempfile_in(dir).map_err(not_writable)?;
+        drop(probe);
+        let mut stale_removed = 0;
+        for d in [dir.to_path_buf(), dir.join(CACHE_DIR)] {
+            if let Ok(entries) = fs::read_dir(&d) {
+                for e in entries.flatten() {
+                    if e.file_name().to_string_lossy().starts_with(TMP_PREFIX) && fs::remove_file(e.path()).is_ok() {
+                        stale_removed += 1;
+                    }
+                }
+            }
+        }
+        Ok(Self { dir: dir.to_path_buf(), _lock: lock, stale_removed })
+    }
+
+    /// The folder.
+    pub fn path(&self) -> &Path {
+        &self.dir
+    }
+
+    /// `<out>/<id>.vtab`.
+    pub fn table_path(&self, id: &str) -> PathBuf {
+        self.dir.join(format!("{id}.vtab"))
+    }
+
+    /// `<out>/<id>.vtab.json`.
+    pub fn sidecar_path(&self, id: &str) -> PathBuf {
+        self.dir.join(format!("{id}.vtab.json"))
+    }
+
+    fn cached(&self, key: &[u8; 32], ext: &str) -> PathBuf {
+        self.dir.join(CACHE_DIR).join(format!("{}.{ext}", hex(key)))
+    }
+
+    /// True if `<out>/<id>.vtab` holds `key`, verifies completely, and has its sidecar.
+    pub fn is_up_to_date(&self, id: &str, key: &[u8; 32]) -> bool {
+        self.sidecar_path(id).is_file() && file_holds(&self.table_path(id), key)
+    }
+
+    /// If the cache holds a verified table for `key`, makes it `<out>/<id>.vtab` (with its sidecar)
+    /// and returns true.
+    pub fn restore(&self, id: &str, key: &[u8; 32]) -> Result<bool, CacheError> {
+        let (vtab, json) = (self.cached(key, "vtab"), self.cached(key, "json"));
+        if !json.is_file() || !file_holds(&vtab, key) {
+            return Ok(false);
+        }
+        self.link_atomic(&vtab, &self.table_path(id))?;
+        self.link_atomic(&json, &self.sidecar_path(id))?;
+        Ok(true)
+    }
+
+    /// Stores a freshly compiled table and sidecar in the cache and publishes them as `<id>`.
+    pub fn store(&self, id: &str, key: &[u8; 32], vtab: &[u8], sidecar: &[u8]) -> Result<(), CacheError> {
+        let (cv, cj) = (self.cached(key, "vtab"), self.cached(key, "json"));
+        write_atomic(&cv, vtab)?;
+        write_atomic(&cj, sidecar)?;
+        self.link_atomic(&cv, &self.table_path(id))?;
+        self.link_atomic(&cj, &self.sidecar_path(id))
+    }
+
+    /// Publishes `src` at `dst` atomically: hard link (or copy) to a temp name, then rename.
+    fn link_atomic(&self, src: &Path, dst: &Path) -> Result<(), CacheError> {
+        let io = |source| CacheError::Io { path: dst.to_path_buf(), source };
+        static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let tmp = self.dir.join(format!("{TMP_PREFIX}{}-{n}", std::process::id()));
+        let _ = fs::remove_file(&tmp);
+        if fs::hard_link(src, &tmp).is_err() {
+            fs::copy(src, &tmp).map_err(io)?;
+        }
+        fs::rename(&tmp, dst).map_err(io)?;
+        sync_dir(&self.dir);
+        Ok(())
+    }
+}
+
+/// True if `path` is a complete, verified `.vtab` whose header carries `key`.
+fn file_holds(path: &Path, key: &[u8; 32]) -> bool {
+    match VtabReader::open(path) {
+        Ok(mut r) => r.header().content_key == *key && r.verify().is_ok(),
+        Err(_) => false,
+    }
+}
+
+/// Writes `bytes` to `path` atomically (temp file in the same folder, fsync, rename).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CacheError> {
+    let io = |source| CacheError::Io { path: path.to_path_buf(), source };
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let mut tmp = tempfile::Builder::new().prefix(TMP_PREFIX).tempfile_in(dir).map_err(io)?;
+    tmp.write_all(bytes).map_err(io)?;
+    // tempfile creates 0600 files; outputs are ordinary shared build artefacts.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file().set_permissions(fs::Permissions::from_mode(0o644)).map_err(io)?;
+    }
+    tmp.as_file().sync_all().map_err(io)?;
+    tmp.persist(path).map_err(|e| io(e.error))?;
+    sync_dir(dir);
+    Ok(())
+}
+
+/// Makes a rename durable (best effort: not every platform can fsync a folder).
+fn sync_dir(dir: &Path) {
+    if let Ok(d) = File::open(dir) {
+        let _ = d.sync_all();
+    }
+}

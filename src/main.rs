@@ -1,0 +1,354 @@
+//! The `voltab` command line. The only place that uses `anyhow`; everything else returns typed
+//! errors. `voltab` with no arguments runs `pipelines/default.ron` into `out/`.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+
+use voltab::compile::{CompileOptions, compile, summary_line};
+use voltab::container::{self, VtabReader};
+use voltab::pipeline::{self, Disk, Embedded, Sources, ValidatedPipeline};
+
+#[derive(Parser)]
+#[command(
+    name = "voltab",
+    version,
+    about = "Compile participating-media tables from RON pipelines and run the stages that use them."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Compile every table a pipeline declares, then run its stages.
+    Run {
+        /// Pipeline file.
+        pipeline: PathBuf,
+        /// Output folder.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        jobs: Option<usize>,
+        /// Print the summary as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Compile tables (incrementally: unchanged tables are not recomputed).
+    Compile {
+        /// Pipeline file.
+        pipeline: PathBuf,
+        /// Output folder.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// Compile only these table ids.
+        #[arg(long, num_args = 1..)]
+        only: Vec<String>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        jobs: Option<usize>,
+        /// Print the summary as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Validate a pipeline without compiling.
+    Check {
+        /// Pipeline file.
+        pipeline: PathBuf,
+        /// Print the root file as JSON (the form `schemas/pipeline.schema.json` describes).
+        #[arg(long)]
+        dump_json: bool,
+    },
+    /// Print a table's header, axes, chunks and compression.
+    Inspect {
+        /// Table file.
+        file: PathBuf,
+        /// Print every chunk.
+        #[arg(long)]
+        chunks: bool,
+    },
+    /// Check tables' integrity (non-zero exit on any problem).
+    Verify {
+        /// Table files.
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+    },
+    /// Compare two tables chunk by chunk (non-zero exit when outside tolerance).
+    Diff {
+        /// First table.
+        a: PathBuf,
+        /// Second table.
+        b: PathBuf,
+        /// Absolute tolerance.
+        #[arg(long, default_value_t = 0.0)]
+        abs_tol: f64,
+        /// Relative tolerance.
+        #[arg(long, default_value_t = 0.0)]
+        rel_tol: f64,
+    },
+    /// Error against run time for every table (JSON, Markdown and PNG plots).
+    Report {
+        /// Pipeline file.
+        pipeline: PathBuf,
+        /// Output folder.
+        #[arg(long, default_value = "report")]
+        out: PathBuf,
+    },
+    /// Evaluate every formula on extreme inputs and print the matrix.
+    Stability {
+        /// Print passing rows too.
+        #[arg(long)]
+        all: bool,
+    },
+    /// Write or check `schemas/` (JSON Schema and reference page) from the code.
+    Schema {
+        /// Folder to write into.
+        #[arg(long, default_value = "schemas")]
+        dir: PathBuf,
+        /// Fail if the files differ instead of writing them.
+        #[arg(long)]
+        check: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match dispatch(cli.command) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("{e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn load(path: &Path) -> Result<ValidatedPipeline> {
+    let sources: &dyn Sources = if !path.exists()
+        && pipeline::parse::EMBEDDED.iter().any(|(p, _)| Path::new(p) == pipeline::parse::normalize(path))
+    {
+        eprintln!("note: {} not found here; using the copy built into voltab", path.display());
+        &Embedded
+    } else {
+        &Disk
+    };
+    // Diagnostics are complete messages; print them as they are.
+    pipeline::load_and_validate(path, sources).map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
+    let progress = std::io::stderr().is_terminal();
+    let cmd = cmd.unwrap_or(Command::Run {
+        pipeline: "pipelines/default.ron".into(),
+        out: "out".into(),
+        jobs: None,
+        json: false,
+    });
+    match cmd {
+        Command::Run { pipeline, out, jobs, json } => {
+            let p = load(&pipeline)?;
+            let summary = compile(&p, &CompileOptions { out_dir: out.clone(), only: Vec::new(), jobs, progress })?;
+            let mut stage_results = Vec::new();
+            for s in p.stages() {
+                stage_results.push((s.id().to_owned(), s.def().run(s.id(), &out)?));
+            }
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&serde_json::json!({ "compile": summary, "stages": stage_results }))?
+                );
+            } else {
+                for t in &summary.tables {
+                    println!("{}", summary_line(t));
+                }
+                for (id, r) in &stage_results {
+                    println!("stage      {id:<20} {}", r.summary);
+                }
+                println!(
+                    "{} tables, {} stages in {:.0} ms → {}",
+                    summary.tables.len(),
+                    stage_results.len(),
+                    summary.total_ms,
+                    out.display()
+                );
+            }
+        }
+        Command::Compile { pipeline, out, only, jobs, json } => {
+            let p = load(&pipeline)?;
+            let summary = compile(&p, &CompileOptions { out_dir: out.clone(), only, jobs, progress })?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                if summary.stale_removed > 0 {
+                    println!("removed {} temporary files left by an interrupted run", summary.stale_removed);
+                }
+                for t in &summary.tables {
+                    println!("{}", summary_line(t));
+                }
+                println!("{} tables in {:.0} ms → {}", summary.tables.len(), summary.total_ms, out.display());
+            }
+        }
+        Command::Check { pipeline, dump_json } => {
+            let p = load(&pipeline)?;
+            if dump_json {
+                let text =
+                    if pipeline.exists() { std::fs::read_to_string(&pipeline)? } else { Embedded.read(&pipeline)? };
+                let file: pipeline::PipelineFile = ron::Options::default()
+                    .with_default_extension(
+                        ron::extensions::Extensions::IMPLICIT_SOME
+                            | ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES,
+                    )
+                    .from_str(&text)?;
+                println!("{}", serde_json::to_string_pretty(&file)?);
+            } else {
+                println!("{}: ok ({} tables, {} stages)", pipeline.display(), p.tables().len(), p.stages().len());
+                for t in p.tables() {
+                    println!(
+                        "  table {:<20} {:<10} key {}",
+                        t.id(),
+                        t.def().kind(),
+                        &voltab::cache::hex(t.key())[..16]
+                    );
+                }
+                for s in p.stages() {
+                    println!("  stage {:<20} {}", s.id(), s.def().kind());
+                }
+            }
+        }
+        Command::Inspect { file, chunks } => inspect(&file, chunks)?,
+        Command::Verify { files } => {
+            let mut bad = 0;
+            for f in &files {
+                match VtabReader::open(f).and_then(|mut r| r.verify()) {
+                    Ok(rep) => println!("ok   {} ({rep})", f.display()),
+                    Err(e) => {
+                        bad += 1;
+                        println!("BAD  {}: {e}", f.display());
+                    }
+                }
+            }
+            if bad > 0 {
+                bail!("{bad} of {} files failed verification", files.len());
+            }
+        }
+        Command::Diff { a, b, abs_tol, rel_tol } => {
+            let mut ra = VtabReader::open(&a).with_context(|| format!("reading {}", a.display()))?;
+            let mut rb = VtabReader::open(&b).with_context(|| format!("reading {}", b.display()))?;
+            let d = container::diff(&mut ra, &mut rb)?;
+            for h in &d.header_differences {
+                println!("header: {h}");
+            }
+            for c in &d.chunks {
+                println!(
+                    "{:<16} slice {:>5}  max abs {:.3e} at {:>7}  max rel {:.3e} at {:>7}",
+                    c.array, c.slice, c.max_abs, c.max_abs_index, c.max_rel, c.max_rel_index
+                );
+            }
+            if d.identical() {
+                println!("identical values");
+            } else if d.within(abs_tol, rel_tol) {
+                println!("within tolerance (abs {abs_tol:e}, rel {rel_tol:e})");
+            } else {
+                println!("DIFFERENT beyond tolerance (abs {abs_tol:e}, rel {rel_tol:e})");
+                return Ok(ExitCode::FAILURE);
+            }
+        }
+        Command::Report { pipeline, out } => {
+            let p = load(&pipeline)?;
+            let r = voltab::report::run(&p, &out, progress)?;
+            print!("{}", voltab::report::markdown(&r));
+            println!("wrote {}/report.json, report.md and {} plots", out.display(), r.tables.len());
+        }
+        Command::Stability { all } => {
+            let rows = voltab::stability::rows();
+            let failed = rows.iter().filter(|r| !r.ok()).count();
+            for r in rows.iter().filter(|r| all || !r.ok()) {
+                println!("{r}");
+            }
+            println!("{} passed, {failed} failed", rows.len() - failed);
+            if failed > 0 {
+                return Ok(ExitCode::FAILURE);
+            }
+        }
+        Command::Schema { dir, check } => {
+            let files = [
+                (
+                    "pipeline.schema.json",
+                    format!("{}\n", serde_json::to_string_pretty(&pipeline::schema::json_schema())?),
+                ),
+                ("reference.md", pipeline::schema::reference_markdown()),
+            ];
+            let mut stale = Vec::new();
+            for (name, text) in &files {
+                let path = dir.join(name);
+                if check {
+                    if std::fs::read_to_string(&path).ok().as_deref() != Some(text.as_str()) {
+                        stale.push(path.display().to_string());
+                    }
+                } else {
+                    std::fs::create_dir_all(&dir)?;
+                    voltab::cache::write_atomic(&path, text.as_bytes())?;
+                    println!("wrote {}", path.display());
+                }
+            }
+            if !stale.is_empty() {
+                bail!("out of date: {} — run `cargo run -- schema` to regenerate", stale.join(", "));
+            }
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn inspect(file: &Path, all_chunks: bool) -> Result<()> {
+    let r = VtabReader::open(file).with_context(|| format!("reading {}", file.display()))?;
+    let h = r.header();
+    let (major, minor) = r.version();
+    println!("file            {}", file.display());
+    println!("format          vtab {major}.{minor}");
+    println!("kind            {} (layout v{})", h.kind, h.kind_schema_version);
+    println!("generator       {}", h.generator_version);
+    println!("content key     {}", voltab::cache::hex(&h.content_key));
+    println!("definition      {}", h.definition_ron);
+    for (ai, a) in h.arrays.iter().enumerate() {
+        let shape: Vec<String> = a.axes.iter().map(|x| x.len.to_string()).collect();
+        println!(
+            "array {ai}: {} [{}] {:?}, unit {:?} — {}",
+            a.name,
+            shape.join(" x "),
+            a.element,
+            a.unit,
+            a.description
+        );
+        if let Some(q) = &a.quantization {
+            println!("    quantised to {} mantissa bits: max relative error {:.3e}", q.mantissa_bits, q.max_rel_error);
+        }
+        for x in &a.axes {
+            println!(
+                "    axis {:<6} {:>8} values {:?} from {} to {} {}",
+                x.name, x.len, x.spacing, x.min, x.max, x.unit
+            );
+        }
+        let chunks: Vec<_> = r.chunks().iter().filter(|c| c.array as usize == ai).collect();
+        let raw: u64 = chunks.iter().map(|c| c.raw_len).sum();
+        let stored: u64 = chunks.iter().map(|c| c.stored_len).sum();
+        println!(
+            "    {} chunks, {raw} bytes raw → {stored} stored, ratio {:.2}",
+            chunks.len(),
+            raw as f64 / stored.max(1) as f64
+        );
+        for c in chunks.iter().take(if all_chunks { usize::MAX } else { 0 }) {
+            println!(
+                "      slice {:>5}: {:>9} → {:>9} bytes ({:?}, crc {:08x})",
+                c.slice, c.raw_len, c.stored_len, c.transform, c.crc32
+            );
+        }
+    }
+    let raw: u64 = r.chunks().iter().map(|c| c.raw_len).sum();
+    let stored: u64 = r.chunks().iter().map(|c| c.stored_len).sum();
+    println!("total           {raw} bytes raw → {stored} stored, ratio {:.2}", raw as f64 / stored.max(1) as f64);
+    Ok(())
+}

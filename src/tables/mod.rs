@@ -1,0 +1,278 @@
+//! Table kinds (the compiler's back end): each kind turns a validated, resolved definition into the
+//! arrays of one `.vtab` file, reports its own error estimate, and offers a ladder of quality budgets
+//! and a reference for `voltab report`.
+//!
+//! Input: [`TableDef`] (resolved parameters; only the validator builds one inside a
+//! [`crate::pipeline::ValidatedTable`]). Output: [`Generated`] — array descriptions, values and
+//! run statistics. Invariant: generators never see unvalidated input and never emit NaN/Inf.
+//!
+//! Adding a kind: a module here with a `declare_params!` block, a variant in [`TableDecl`] and
+//! [`TableDef`], and the match arms below.
+
+pub mod phase_hg;
+
+use serde::{Deserialize, Serialize};
+
+use crate::container::{ArrayDesc, ArrayValues};
+
+/// A table entry as written in a pipeline file (kind + optional fields).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[non_exhaustive]
+pub enum TableDecl {
+    /// Henyey–Greenstein phase tables (phase value, cumulative, inverse CDF, ZH coefficients).
+    PhaseHg(phase_hg::PhaseHgRaw),
+}
+
+/// A resolved table definition: every parameter present. Its canonical RON is hashed into the
+/// content key.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum TableDef {
+    /// See [`phase_hg`].
+    PhaseHg(phase_hg::PhaseHg),
+}
+
+/// A problem with one field's value, found by a kind's own validation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldIssue {
+    /// Field name as written in RON.
+    pub field: &'static str,
+    /// What is wrong, with the value.
+    pub message: String,
+    /// Valid range and unit, or how to fix it.
+    pub help: String,
+}
+
+/// Run statistics of one generation: never stored in the `.vtab` (the bytes must not depend on
+/// them), written to the JSON sidecar and the report instead.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct GenStats {
+    /// Samples or values that came out NaN/Inf and were discarded (Monte-Carlo kinds) — always
+    /// reported, so a silent loss of samples is visible.
+    pub nonfinite_discarded: u64,
+    /// Number of random samples drawn (0 for closed-form kinds).
+    pub samples: u64,
+    /// Named error estimates against the kind's independent reference.
+    pub errors: Vec<ErrorEstimate>,
+}
+
+/// One error estimate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ErrorEstimate {
+    /// What was measured, e.g. `phase_interp_max_rel`.
+    pub name: String,
+    /// The measured value.
+    pub value: f64,
+    /// How it was measured.
+    pub how: String,
+}
+
+impl GenStats {
+    /// The headline error (first estimate), for one-line summaries.
+    pub fn headline(&self) -> Option<&ErrorEstimate> {
+        self.errors.first()
+    }
+}
+
+/// The output of a generator.
+#[derive(Debug, Clone)]
+pub struct Generated {
+    /// One description per array.
+    pub arrays: Vec<ArrayDesc>,
+    /// Values, in the same order, row-major over the array's axes.
+    pub values: Vec<ArrayValues>,
+    /// Run statistics.
+    pub stats: GenStats,
+}
+
+/// Failure inside a generator (after validation passed).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum GenerateError {
+    /// A value could not be represented (e.g. overflow to infinity after conversion to f32).
+    #[error("{array}[{index}] evaluated to {value}, which cannot be stored; {help}")]
+    NonFinite {
+        /// Array name.
+        array: String,
+        /// Flat element index.
+        index: u64,
+        /// The offending value.
+        value: f64,
+        /// What to change.
+        help: String,
+    },
+    /// The generated arrays do not have the kind's layout (a bug in the generator).
+    #[error("generated arrays have an unexpected layout: {0}")]
+    Layout(String),
+}
+
+/// Progress callback: called with a number of finished work units.
+pub type Progress<'a> = &'a (dyn Fn(u64) + Sync);
+
+impl TableDecl {
+    /// Kind name as written in RON.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            TableDecl::PhaseHg(_) => phase_hg::PhaseHgRaw::KIND,
+        }
+    }
+
+    /// All kind names, for "did you mean".
+    pub const KINDS: &'static [&'static str] = &[phase_hg::PhaseHgRaw::KIND];
+
+    /// Field names of this kind (without `id`/`preset`).
+    pub fn field_names(&self) -> Vec<&'static str> {
+        match self {
+            TableDecl::PhaseHg(_) => phase_hg::PhaseHgRaw::FIELDS.iter().map(|f| f.name).collect(),
+        }
+    }
+
+    /// The entry's `id`.
+    pub fn id(&self) -> Option<&str> {
+        match self {
+            TableDecl::PhaseHg(r) => r.id.as_deref(),
+        }
+    }
+
+    /// The entry's `preset`.
+    pub fn preset(&self) -> Option<&str> {
+        match self {
+            TableDecl::PhaseHg(r) => r.preset.as_deref(),
+        }
+    }
+
+    /// Fields set explicitly (for locating errors).
+    pub fn set_fields(&self) -> Vec<&'static str> {
+        match self {
+            TableDecl::PhaseHg(r) => r.set_fields(),
+        }
+    }
+
+    /// `self` with unset fields taken from `base`; `None` if the kinds differ.
+    pub fn merged_over(&self, base: &TableDecl) -> Option<TableDecl> {
+        match (self, base) {
+            (TableDecl::PhaseHg(a), TableDecl::PhaseHg(b)) => Some(TableDecl::PhaseHg(a.merged_over(b))),
+        }
+    }
+
+    /// Fills defaults.
+    pub fn resolve(&self) -> TableDef {
+        match self {
+            TableDecl::PhaseHg(r) => TableDef::PhaseHg(r.resolve()),
+        }
+    }
+}
+
+impl TableDef {
+    /// Kind name.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            TableDef::PhaseHg(_) => phase_hg::PhaseHgRaw::KIND,
+        }
+    }
+
+    /// Version of this kind's array layout; a reader of the kind checks it.
+    pub fn kind_schema_version(&self) -> u32 {
+        match self {
+            TableDef::PhaseHg(_) => phase_hg::KIND_SCHEMA_VERSION,
+        }
+    }
+
+    /// Version of the generator's numerics; bumping it invalidates cached tables of this kind.
+    pub fn generator_version(&self) -> &'static str {
+        match self {
+            TableDef::PhaseHg(_) => phase_hg::GENERATOR_VERSION,
+        }
+    }
+
+    /// Range checks of every field.
+    pub fn validate(&self) -> Vec<FieldIssue> {
+        match self {
+            TableDef::PhaseHg(p) => p.validate(),
+        }
+    }
+
+    /// Bytes the generator will hold in memory at its peak (checked before allocating).
+    pub fn estimated_bytes(&self) -> u128 {
+        match self {
+            TableDef::PhaseHg(p) => p.estimated_bytes(),
+        }
+    }
+
+    /// Work units reported through the progress callback.
+    pub fn work_units(&self) -> u64 {
+        match self {
+            TableDef::PhaseHg(p) => p.work_units(),
+        }
+    }
+
+    /// Canonical RON text of the definition: part of the content key and stored in the header.
+    pub fn canonical_ron(&self) -> String {
+        // Serialising a plain struct of numbers, strings and enums cannot fail; fall back to Debug
+        // (still deterministic) rather than panic if it ever did.
+        ron::to_string(self).unwrap_or_else(|_| format!("{self:?}"))
+    }
+
+    /// Runs the generator. `key` is the content key (seeds random streams).
+    pub fn generate(&self, key: &[u8; 32], progress: Progress<'_>) -> Result<Generated, GenerateError> {
+        match self {
+            TableDef::PhaseHg(p) => p.generate(key, progress),
+        }
+    }
+}
+
+impl TableDef {
+    /// Measures a generated table against the kind's independent reference.
+    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
+        match self {
+            TableDef::PhaseHg(p) => p.estimate_errors(generated, key),
+        }
+    }
+
+    /// Quality budgets for `voltab report`, cheapest first: (label, definition).
+    pub fn report_ladder(&self) -> Vec<(String, TableDef)> {
+        match self {
+            TableDef::PhaseHg(p) => p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::PhaseHg(d))).collect(),
+        }
+    }
+
+    /// What the report's error axis means for this kind.
+    pub fn report_error_name(&self) -> &'static str {
+        match self {
+            TableDef::PhaseHg(_) => "max relative error of interpolated phase lookups vs double-double reference",
+        }
+    }
+
+    /// Error per curve (e.g. per g) of a generated table, for the report.
+    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, String> {
+        match self {
+            TableDef::PhaseHg(p) => p.report_measure(generated),
+        }
+    }
+}
+
+/// Converts f64 values to the array's element type, refusing non-finite results.
+pub fn to_element(desc: &ArrayDesc, values: Vec<f64>, help: &str) -> Result<ArrayValues, GenerateError> {
+    use crate::container::ElementType;
+    let bad = |index: usize, value: f64| GenerateError::NonFinite {
+        array: desc.name.clone(),
+        index: index as u64,
+        value,
+        help: help.to_owned(),
+    };
+    match desc.element {
+        ElementType::F64 => {
+            if let Some((i, v)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(bad(i, *v));
+            }
+            Ok(ArrayValues::F64(values))
+        }
+        ElementType::F32 => {
+            let out: Vec<f32> = values.iter().map(|&v| v as f32).collect();
+            if let Some((i, _)) = out.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(bad(i, values[i]));
+            }
+            Ok(ArrayValues::F32(out))
+        }
+    }
+}
