@@ -1,0 +1,22 @@
+//! The extreme-input matrix: every row must hold (finite, in range, analytic limits).
+
+#[test]
+fn every_formula_survives_extreme_inputs() {
+    let rows = voltab::stability::rows();
+    let failed: Vec<String> = rows.iter().filter(|r| !r.ok()).map(ToString::to_string).collect();
+    assert!(failed.is_empty(), "{} of {} rows failed:\n{}", failed.len(), rows.len(), failed.join("\n"));
+    // 11 g × (5 μ × 2 + 3 + 5 ξ + 4) + 2 whole-table rows: the matrix must not silently shrink.
+    assert_eq!(rows.len(), 11 * (5 * 2 + 3 + 5 + 4) + 2);
+}
+
+#[test]
+fn the_harness_catches_a_bad_value() {
+    use voltab::stability::{Expect, Row};
+    let r = |value, expect| Row { kind: "t", formula: "f", input: String::new(), value, expect };
+    assert!(!r(f64::NAN, Expect::Finite).ok());
+    assert!(!r(f64::INFINITY, Expect::Positive).ok());
+    assert!(!r(0.0, Expect::Positive).ok());
+    assert!(!r(1.5, Expect::InRange(-1.0, 1.0)).ok());
+    assert!(!r(1.1, Expect::Close { to: 1.0, rel: 0.01 }).ok());
+    assert!(r(1.005, Expect::Close { to: 1.0, rel: 0.01 }).ok());
+}
