@@ -34,6 +34,8 @@ pub struct Row {
     pub errors: Vec<(String, f64)>,
     /// Worst error over curves.
     pub error_max: f64,
+    /// NaN/Inf samples the generator discarded (always shown, so silent loss is visible).
+    pub nonfinite_discarded: u64,
 }
 
 /// A table's results.
@@ -148,6 +150,7 @@ pub fn run(p: &ValidatedPipeline, out_dir: &Path, progress: bool) -> Result<Repo
                 compression_ratio: enc.stats.ratio(),
                 errors,
                 error_max,
+                nonfinite_discarded: generated.stats.nonfinite_discarded,
             });
             bar.inc(1);
         }
@@ -222,12 +225,18 @@ pub fn markdown(r: &Report) -> String {
             t.plot.file_name().map_or_else(String::new, |f| f.to_string_lossy().into_owned())
         ));
         s.push_str(
-            "| budget | generate ms | encode ms | bytes | ratio | worst error |\n|---|---:|---:|---:|---:|---:|\n",
+            "| budget | generate ms | encode ms | bytes | ratio | NaN/Inf discarded | worst error |\n|---|---:|---:|---:|---:|---:|---:|\n",
         );
         for row in &t.rows {
             s.push_str(&format!(
-                "| {} | {:.3} | {:.3} | {} | {:.2} | {:.3e} |\n",
-                row.budget, row.generate_ms, row.encode_ms, row.bytes, row.compression_ratio, row.error_max
+                "| {} | {:.3} | {:.3} | {} | {:.2} | {} | {:.3e} |\n",
+                row.budget,
+                row.generate_ms,
+                row.encode_ms,
+                row.bytes,
+                row.compression_ratio,
+                row.nonfinite_discarded,
+                row.error_max
             ));
         }
         s.push('\n');
