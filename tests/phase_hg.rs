@@ -152,3 +152,16 @@ fn uniform_angle_spacing_resolves_peaked_lobes_better() {
     let ang = table(&[0.99], 1024, MuSpacing::UniformAngle, Element::F64).phase_lookup_error(0, 2048).unwrap();
     assert!(ang < lin / 10.0, "uniform-angle {ang:e} vs linear {lin:e}");
 }
+
+/// Regression: grid g values came out as -0.7999999999999999, which showed in plot legends and
+/// made `PlotPhase(g: [-0.8])` depend on float noise.
+#[test]
+fn grid_values_land_on_the_decimals_a_person_wrote() {
+    let g = GValues::Grid { min: -0.9, max: 0.9, count: 19 }.values();
+    assert_eq!(g.len(), 19);
+    assert_eq!(g[1], -0.8);
+    assert_eq!(g[9], 0.0);
+    assert_eq!(g[12], 0.3);
+    assert_eq!(g[18], 0.9);
+    assert!(g.windows(2).all(|w| w[0] < w[1]));
+}
