@@ -99,6 +99,15 @@ enum Command {
         #[arg(long, default_value = "report")]
         out: PathBuf,
     },
+    /// Timings side by side as ratios: cold vs no-op compile, 1 vs N threads, zstd levels.
+    Bench {
+        /// Pipeline file.
+        #[arg(default_value = "pipelines/default.ron")]
+        pipeline: PathBuf,
+        /// Print the rows as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Evaluate every formula on extreme inputs and print the matrix.
     Stability {
         /// Print passing rows too.
@@ -262,6 +271,15 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             let r = voltab::report::run(&p, &out, progress)?;
             print!("{}", voltab::report::markdown(&r));
             println!("wrote {}/report.json, report.md and {} plots", out.display(), r.tables.len());
+        }
+        Command::Bench { pipeline, json } => {
+            let p = load(&pipeline)?;
+            let rows = voltab::bench::run(&p)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&rows)?);
+            } else {
+                print!("{}", voltab::bench::render(&rows));
+            }
         }
         Command::Stability { all } => {
             let rows = voltab::stability::rows();
