@@ -177,9 +177,12 @@ pub fn build_table(t: &ValidatedTable, progress: &(dyn Fn(u64) + Sync)) -> Resul
         .estimate_errors(&generated, t.key())
         .map_err(|e| CompileError::Generate { id: t.id().into(), source: GenerateError::Layout(e) })?;
     let check_ms = t_check.elapsed().as_secs_f64() * 1e3;
+    // Progress: generation reports its own units; checking and encoding count as much again each.
+    progress(t.def().work_units());
     let t1 = Instant::now();
     let enc = encode_table(t, &generated).map_err(|source| CompileError::Encode { id: t.id().into(), source })?;
     let encode_ms = t1.elapsed().as_secs_f64() * 1e3;
+    progress(t.def().work_units());
     let s = &enc.stats;
     let sidecar = Sidecar {
         id: t.id().into(),
@@ -243,7 +246,7 @@ pub fn compile(p: &ValidatedPipeline, opts: &CompileOptions) -> Result<CompileSu
     }
 
     let todo: Vec<usize> = (0..selected.len()).filter(|&i| results[i].is_none()).collect();
-    let total_units: u64 = todo.iter().map(|&i| selected[i].def().work_units()).sum();
+    let total_units: u64 = todo.iter().map(|&i| 3 * selected[i].def().work_units()).sum();
     let bar = progress_bar(opts.progress && !todo.is_empty(), total_units);
     let run = || -> Vec<(usize, Result<TableResult, CompileError>)> {
         todo.par_iter()
