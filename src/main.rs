@@ -232,7 +232,12 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
         Command::Verify { files } => {
             let mut bad = 0;
             for f in &files {
-                match VtabReader::open(f).and_then(|mut r| r.verify()) {
+                let checked = VtabReader::open(f).map_err(|e| e.to_string()).and_then(|mut r| {
+                    let rep = r.verify().map_err(|e| e.to_string())?;
+                    voltab::tables::check_known_kind(r.header())?;
+                    Ok(rep)
+                });
+                match checked {
                     Ok(rep) => println!("ok   {} ({rep})", f.display()),
                     Err(e) => {
                         bad += 1;
@@ -328,6 +333,9 @@ fn inspect(file: &Path, all_chunks: bool) -> Result<()> {
     println!("file            {}", file.display());
     println!("format          vtab {major}.{minor}");
     println!("kind            {} (layout v{})", h.kind, h.kind_schema_version);
+    if let Err(e) = voltab::tables::check_known_kind(h) {
+        println!("warning         {e}");
+    }
     println!("generator       {}", h.generator_version);
     println!("content key     {}", voltab::cache::hex(&h.content_key));
     println!("definition      {}", h.definition_ron);

@@ -115,3 +115,44 @@ fn diff_reports_per_chunk_maxima_and_honours_tolerances() {
         .fold(0.0, f64::max);
     assert!(max_rel > 0.0 && max_rel <= 2f64.powi(-13), "{s}");
 }
+
+#[test]
+fn unknown_kinds_and_newer_layouts_are_refused_by_verify() {
+    use voltab::container::{ArrayDesc, ArrayValues, Axis, ElementType, EncodeOptions, Header, encode};
+    let d = tempdir();
+    let make = |kind: &str, layout: u32| {
+        let header = Header {
+            kind: kind.into(),
+            kind_schema_version: layout,
+            generator_version: "test/1".into(),
+            definition_ron: "()".into(),
+            content_key: [0; 32],
+            arrays: vec![ArrayDesc {
+                name: "a".into(),
+                description: String::new(),
+                unit: String::new(),
+                element: ElementType::F32,
+                axes: vec![Axis::linear("x", "", 0.0, 1.0, 4)],
+                quantization: None,
+            }],
+        };
+        let bytes =
+            encode(&header, &[ArrayValues::F32(vec![1.0, 2.0, 3.0, 4.0])], &EncodeOptions::default()).unwrap().bytes;
+        let p = d.path().join(format!("{kind}-{layout}.vtab"));
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let o = run(&["verify", make("ZhResponse", 1).to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        text(&o).contains("unknown table kind `ZhResponse`") && text(&o).contains("upgrade voltab"),
+        "{}",
+        text(&o)
+    );
+    let o = run(&["verify", make("PhaseHg", 99).to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("layout version 99 is newer"), "{}", text(&o));
+    // inspect still shows the header of a table it cannot consume, with a warning.
+    let o = run(&["inspect", make("ZhResponse", 1).to_str().unwrap()]);
+    assert!(o.status.success() && text(&o).contains("warning         unknown table kind"), "{}", text(&o));
+}

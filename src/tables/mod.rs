@@ -251,6 +251,29 @@ impl TableDef {
     }
 }
 
+/// Checks that a table's kind and layout version are ones this build can consume.
+pub fn check_known_kind(h: &crate::container::Header) -> Result<(), String> {
+    let supported = match h.kind.as_str() {
+        k if k == phase_hg::PhaseHgRaw::KIND => phase_hg::KIND_SCHEMA_VERSION,
+        other => {
+            return Err(format!(
+                "unknown table kind `{other}`: voltab {} reads {}; upgrade voltab to use this table",
+                env!("CARGO_PKG_VERSION"),
+                TableDecl::KINDS.join(", ")
+            ));
+        }
+    };
+    if h.kind_schema_version > supported {
+        return Err(format!(
+            "{} layout version {} is newer than the {supported} this voltab {} reads; upgrade voltab",
+            h.kind,
+            h.kind_schema_version,
+            env!("CARGO_PKG_VERSION")
+        ));
+    }
+    Ok(())
+}
+
 /// Converts f64 values to the array's element type, refusing non-finite results.
 pub fn to_element(desc: &ArrayDesc, values: Vec<f64>, help: &str) -> Result<ArrayValues, GenerateError> {
     use crate::container::ElementType;
