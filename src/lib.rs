@@ -25,7 +25,7 @@
 //! - [`physics`]: phase functions and counter-based random streams (one home per concept).
 //! - [`reference`](mod@reference): independent high-precision references the tables are judged against.
 //! - [`report`]: error-against-run-time reports and plots.
-//! - [`bench`]: timings measured side by side, printed as ratios.
+//! - [`bench`](mod@bench): timings measured side by side, printed as ratios.
 //! - [`stability`]: the extreme-input matrix every formula must survive.
 //!
 //! Papers: elek2014 (POP; F_hg cumulative), dubouchet2019 (ZH convention) — see
