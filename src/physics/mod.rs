@@ -1,5 +1,7 @@
-//! Physics shared by every table kind and stage: phase functions, random streams.
+//! Physics shared by every table kind and stage: phase functions, random streams, spherical
+//! harmonics.
 //! One home per concept: no table kind carries its own copy of a phase function.
 
 pub mod hg;
 pub mod rng;
+pub mod sh;
