@@ -1,5 +1,7 @@
 //! Independent reference evaluations that tables and stages are judged against: different
 //! arithmetic (double-double) and different formulas (closed forms, quadrature) from the
-//! production code in `physics`.
+//! production code in `physics`, and an analog random walk (`walk`) that shares no code with any
+//! table generator.
 
 pub mod hg_hp;
+pub mod walk;
