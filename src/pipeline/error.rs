@@ -127,9 +127,16 @@ impl fmt::Display for PipelineError {
 /// The closest candidate to `word` if it is plausibly a typo of it.
 pub fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
     let word_l = word.to_ascii_lowercase();
+    // Jaro–Winkler catches shared prefixes ("mu_bin"), Damerau–Levenshtein catches transpositions
+    // in short names ("fgo" for "fog").
     candidates
         .into_iter()
-        .map(|c| (strsim::jaro_winkler(&word_l, &c.to_ascii_lowercase()), c))
+        .map(|c| {
+            let c_l = c.to_ascii_lowercase();
+            let score =
+                strsim::jaro_winkler(&word_l, &c_l).max(strsim::normalized_damerau_levenshtein(&word_l, &c_l) + 0.15);
+            (score, c)
+        })
         .filter(|(score, _)| *score >= 0.8)
         .max_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, c)| c)
@@ -145,5 +152,18 @@ pub fn suggestion_help(word: &str, candidates: &[&str], what: &str) -> String {
     match did_you_mean(word, candidates.iter().copied()) {
         Some(s) => format!("did you mean `{s}`? {list}"),
         None => list,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::did_you_mean;
+
+    #[test]
+    fn suggests_for_typos_and_transpositions_but_not_for_unrelated_words() {
+        assert_eq!(did_you_mean("mu_bin", ["mu_bins", "xi_bins", "g"]), Some("mu_bins"));
+        assert_eq!(did_you_mean("fgo", ["fog", "hg_dubouchet"]), Some("fog"));
+        assert_eq!(did_you_mean("PhaseHG", ["PhaseHg"]), Some("PhaseHg"));
+        assert_eq!(did_you_mean("albedo", ["mu_bins", "xi_bins", "g", "zh_order"]), None);
     }
 }
