@@ -7,6 +7,8 @@
 //! descriptions and contain finite values only — a table with NaN/Inf is never
 //! written.
 
+use rayon::prelude::*;
+
 use super::error::ContainerError;
 use super::format::{
     ArrayValues, ChunkEntry, END_MAGIC, ElementType, Header, MAX_META_LEN, Transform, bincode_config, encode_preamble,
@@ -174,8 +176,12 @@ pub fn encode(header: &Header, arrays: &[ArrayValues], opts: &EncodeOptions) -> 
                 .collect(),
         };
         let mut stats = ArrayStats { name: desc.name.clone(), raw_bytes: 0, stored_bytes: 0 };
-        for (slice, raw) in raws.iter().enumerate() {
-            let (transform, stored) = encode_chunk(raw, desc.element, row_len, opts.zstd_level)?;
+        // Chunks compress independently, in parallel; collecting in slice order keeps the bytes
+        // independent of the thread count.
+        let encoded: Vec<Result<(Transform, Vec<u8>), ContainerError>> =
+            raws.par_iter().map(|raw| encode_chunk(raw, desc.element, row_len, opts.zstd_level)).collect();
+        for (slice, (raw, enc)) in raws.iter().zip(encoded).enumerate() {
+            let (transform, stored) = enc?;
             chunks.push(ChunkEntry {
                 array: ai as u32, // validate_header bounds the array count by u32
                 slice: slice as u64,
