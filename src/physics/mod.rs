@@ -5,3 +5,4 @@
 pub mod hg;
 pub mod rng;
 pub mod sh;
+pub mod zh_transport;
