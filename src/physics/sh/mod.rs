@@ -469,8 +469,9 @@ impl Iterator for ClampedCosine {
 /// `n`-point Gauss–Legendre rule on `[−1, 1]` as `(node, weight)` pairs, nodes descending. Newton's method on
 /// `P_n(cos θ)` in the angle `θ` from the asymptotic guess `θ_i = π(i + 3/4)/(n + 1/2)`, so that
 /// `1 − x² = sin² θ` in the weight `w = 2 sin²θ / (n (P_{n−1} − x P_n))²` carries no cancellation.
-/// Exact for polynomials of degree `≤ 2n − 1`. `n = 0` gives no nodes.
-fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+/// Exact for polynomials of degree `≤ 2n − 1`. `n = 0` gives no nodes. This is the crate's one
+/// Gauss–Legendre rule (the `reference` module keeps its own on purpose, to stay independent).
+pub fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
     let nf = n as f64;
     // (P_{n−1}(x), P_n(x)) at x = cos θ, n ≥ 1, with the gap 1 − x = 2 sin²(θ/2) free of cancellation
     // (θ ≤ π/2 + ε here, so x ≥ −ε).

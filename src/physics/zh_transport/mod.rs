@@ -86,8 +86,9 @@ use std::f64::consts::{PI, TAU};
 
 use rayon::prelude::*;
 
+use crate::physics::sh::gauss_legendre;
 use crate::physics::{hg, sh};
-use quad::{Node, gauss_legendre, graded};
+use quad::{Node, graded};
 
 /// `4π`.
 const FOUR_PI: f64 = 4.0 * PI;

@@ -1,5 +1,5 @@
-//! Quadrature rules of the response generator: Gauss–Legendre on `[−1, 1]` (Newton iteration on the
-//! three-term recurrence) and a composite rule graded geometrically toward both ends of an interval.
+//! Quadrature rules of the response generator: a composite rule graded geometrically toward both ends
+//! of an interval, built from the crate's Gauss–Legendre rule ([`crate::physics::sh::gauss_legendre`]).
 //!
 //! The graded rule returns every node as its distance to *both* ends, each formed without cancellation,
 //! because the integrands of the parent module are evaluated through `sin`/`tan` of those distances near
@@ -10,49 +10,6 @@ pub(super) const GRADING: f64 = 0.125;
 
 /// Number of geometric refinement levels toward each end (smallest panel `8⁻⁷ ≈ 4.8e-7` of a half).
 pub(super) const LEVELS: i32 = 7;
-
-/// `n`-point Gauss–Legendre rule on `[−1, 1]` as `(node, weight)`, nodes ascending. `n = 0` gives no nodes.
-pub(super) fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
-    let nf = n as f64;
-    let mut rule: Vec<(f64, f64)> = (0..n)
-        .map(|i| {
-            // Tricomi's initial guess, then Newton on P_n.
-            let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (nf + 0.5)).cos();
-            let mut dp = 1.0;
-            for _ in 0..100 {
-                let (p, d) = legendre_with_derivative(n, x);
-                dp = d;
-                let step = p / d;
-                x -= step;
-                if step.abs() < 1e-16 {
-                    break;
-                }
-            }
-            let (_, d) = legendre_with_derivative(n, x);
-            if d.is_finite() {
-                dp = d;
-            }
-            (x, 2.0 / ((1.0 - x * x) * dp * dp))
-        })
-        .collect();
-    rule.sort_by(|a, b| a.0.total_cmp(&b.0));
-    rule
-}
-
-/// `(P_n(x), P_n'(x))` by the three-term recurrence; requires `|x| < 1` for the derivative.
-fn legendre_with_derivative(n: usize, x: f64) -> (f64, f64) {
-    let (mut p0, mut p1) = (1.0, x);
-    if n == 0 {
-        return (1.0, 0.0);
-    }
-    for k in 1..n {
-        let kf = k as f64;
-        let p2 = ((2.0 * kf + 1.0) * x * p1 - kf * p0) / (kf + 1.0);
-        (p0, p1) = (p1, p2);
-    }
-    let nf = n as f64;
-    (p1, nf * (x * p1 - p0) / (x * x - 1.0))
-}
 
 /// A node of a graded rule on `[a, b]`: distances `lo = x − a` and `hi = b − x` (both accurate) and weight.
 #[derive(Debug, Clone, Copy)]
@@ -67,7 +24,7 @@ pub(super) struct Node {
 
 /// Composite Gauss–Legendre rule on an interval of length `len ≥ 0`, graded toward both ends: each half
 /// is split into panels whose lengths shrink by [`GRADING`] toward its end ([`LEVELS`] times), each panel
-/// carrying the `base` rule (a [`gauss_legendre`] rule). Integrates smooth functions with boundary layers
+/// carrying the `base` rule (a [`crate::physics::sh::gauss_legendre`] rule). Integrates smooth functions with boundary layers
 /// (exponential cut-offs, peaked phase functions, integrable end singularities) of any width down to
 /// `~len · 8⁻⁷`.
 pub(super) fn graded(len: f64, base: &[(f64, f64)]) -> Vec<Node> {
