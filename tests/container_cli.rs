@@ -156,3 +156,35 @@ fn unknown_kinds_and_newer_layouts_are_refused_by_verify() {
     let o = run(&["inspect", make("ZhResponse", 1).to_str().unwrap()]);
     assert!(o.status.success() && text(&o).contains("warning         unknown table kind"), "{}", text(&o));
 }
+
+/// Regression: a container-valid file of kind PhaseHg with a 1-sample μ axis made lookups index out of
+/// bounds; it must be refused with a message instead.
+#[test]
+fn a_well_formed_but_unusable_phase_hg_file_is_refused_without_panicking() {
+    use voltab::container::{ArrayDesc, ArrayValues, Axis, ElementType, EncodeOptions, Header, encode};
+    use voltab::tables::phase_hg::{ARRAYS, PhaseHgTable};
+    let d = tempdir();
+    let desc = |name: &str, second: Axis| ArrayDesc {
+        name: name.into(),
+        description: String::new(),
+        unit: String::new(),
+        element: ElementType::F64,
+        axes: vec![Axis::explicit("g", "", vec![0.5]), second],
+        quantization: None,
+    };
+    let one = Axis::explicit("mu", "", vec![0.0]);
+    let arrays: Vec<ArrayDesc> = ARRAYS.iter().map(|n| desc(n, one.clone())).collect();
+    let header = Header {
+        kind: "PhaseHg".into(),
+        kind_schema_version: 1,
+        generator_version: "hostile/1".into(),
+        definition_ron: "()".into(),
+        content_key: [0; 32],
+        arrays,
+    };
+    let values: Vec<ArrayValues> = (0..5).map(|_| ArrayValues::F64(vec![1.0])).collect();
+    let p = d.path().join("bad.vtab");
+    std::fs::write(&p, encode(&header, &values, &EncodeOptions::default()).unwrap().bytes).unwrap();
+    let e = PhaseHgTable::open(&p, None).unwrap_err().to_string();
+    assert!(e.contains("unusable for lookups"), "{e}");
+}

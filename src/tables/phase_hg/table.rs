@@ -103,9 +103,23 @@ impl PhaseHgTable {
         if names != ARRAYS || descs.iter().any(|d| d.axes.len() != 2) {
             return Err(format!("unexpected PhaseHg arrays {names:?}; expected {ARRAYS:?} over (g, ·)"));
         }
+        // A file can be well-formed as a container yet not a usable PhaseHg table (written by a buggy
+        // or hostile tool): check everything the lookups rely on, so they can index without panicking.
         let g = descs[0].axes[0].values_vec();
         let mu = descs[0].axes[1].values_vec();
         let xi_bins = descs[2].axes[1].len as usize;
+        if descs.iter().any(|d| d.axes[0] != descs[0].axes[0]) || descs[1].axes[1] != descs[0].axes[1] {
+            return Err("PhaseHg arrays disagree on their g or mu axes".into());
+        }
+        if descs[3].axes[1] != descs[4].axes[1] {
+            return Err("PhaseHg zh and legendre arrays disagree on their l axis".into());
+        }
+        if mu.len() < 2 || xi_bins < 2 || !mu.windows(2).all(|w| w[0] < w[1]) {
+            return Err(format!(
+                "PhaseHg axes unusable for lookups: {} mu values (need >= 2, strictly increasing), {xi_bins} xi values (need >= 2)",
+                mu.len()
+            ));
+        }
         let mut t = Self { g, mu, xi_bins, slices: Vec::new() };
         if !values.is_empty() {
             let flat: Vec<Vec<f64>> = values.iter().map(ArrayValues::to_f64).collect();
@@ -240,9 +254,13 @@ fn strided(n: usize, max: usize) -> impl Iterator<Item = usize> {
     (0..n).step_by(step).chain(std::iter::once(n - 1))
 }
 
-/// Linear interpolation of `ys` on a sorted axis `xs` at x (clamped to the axis range).
+/// Linear interpolation of `ys` on a sorted axis `xs` at x (clamped to the axis range); NaN when
+/// `xs` is empty or `ys` is shorter than `xs`.
 pub fn lerp_on(xs: &[f64], ys: &[f64], x: f64) -> f64 {
     let n = xs.len();
+    if n == 0 || ys.len() < n {
+        return f64::NAN; // documented: no data to interpolate
+    }
     if n == 1 {
         return ys[0];
     }
