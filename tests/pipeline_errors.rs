@@ -82,6 +82,9 @@ fn empty_and_unsorted_axes_are_rejected() {
     assert!(e.has(K::OutOfRange) && s.contains("between 1 and 4096 g values"), "{s}");
     let (_, s) = err("(tables: [PhaseHg(id: \"a\", g: [0.5, 0.5])])");
     assert!(s.contains("strictly increasing"), "{s}");
+    // Regression: validation used to expand the grid before checking its count (32 GB here).
+    let (e, s) = err("(tables: [PhaseHg(id: \"a\", g: (min: -0.5, max: 0.5, count: 4000000000))])");
+    assert!(e.has(K::OutOfRange) && s.contains("count must be between 1 and 4096"), "{s}");
     let (_, s) = err("(tables: [PhaseHg(id: \"a\", g: (min: 0.5, max: -0.5, count: 3))])");
     assert!(s.contains("inconsistent"), "{s}");
     for bins in ["0", "1", "16777217"] {

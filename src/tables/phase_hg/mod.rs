@@ -191,7 +191,13 @@ impl PhaseHg {
                 }
             }
         }
-        if let Some(bad) = self.g.values().into_iter().find(|g| hg::validate_g(*g).is_err()) {
+        // Only expand a grid whose size passed the check above (a count of 4e9 must not allocate).
+        let expandable = match &self.g {
+            GValues::List(_) => true,
+            GValues::Grid { count, .. } => *count as usize <= MAX_G,
+        };
+        let values = if expandable { self.g.values() } else { Vec::new() };
+        if let Some(bad) = values.into_iter().find(|g| hg::validate_g(*g).is_err()) {
             issues.push(FieldIssue {
                 field: "g",
                 message: format!("g = {bad} is outside (-1, 1)"),
