@@ -79,6 +79,7 @@
 //! clamps each part at 0.
 
 mod quad;
+pub mod query;
 #[cfg(test)]
 mod tests;
 

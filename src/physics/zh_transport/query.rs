@@ -1,0 +1,205 @@
+//! The query side of the responses (dubouchet2019 Sec. 4.3–4.4): canonical tables (σ_s = 1, σ_a = 0,
+//! lengths in mean free paths) → irradiance in a real homogeneous medium, split into direct, single and
+//! multiple scattering.
+//!
+//! Input: a [`Response`], a [`Medium`] in scene units (1/m), the emitter strength (intensity in W/sr
+//! for a point emitter, irradiance in W/m² at the boundary for a directional one), the distance (or
+//! boundary depth) in metres and the cosine between the receiver normal and the light axis.
+//! Derivation (Sec. 4.3 with absorption): measuring lengths in mean free paths of the real medium,
+//! x = σ_t x', turns it into the canonical medium with albedo α = σ_s/σ_t. A path with b scattering
+//! events then carries α^b (one factor per event, the "per-bounce weights (σ_s/σ_t)^b" of Sec. 5.1), the
+//! table is read at d_q = σ_t d', and a point emitter's 1/r² in scaled lengths brings σ_t² (the σ_r² of
+//! Sec. 4.3); directional entries are unscaled. The direct term is evaluated analytically in scene units.
+//! Heterogeneous media enter through [`effective_sigma`] (Sec. 4.4): the length-weighted mean
+//! coefficient along the connecting segment, which is exact for the direct term.
+
+use super::{EmitterKind, Response};
+use crate::physics::sh;
+
+/// A homogeneous medium in scene units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Medium {
+    /// Scattering coefficient σ_s (1/m), ≥ 0.
+    pub sigma_s: f64,
+    /// Absorption coefficient σ_a (1/m), ≥ 0.
+    pub sigma_a: f64,
+}
+
+/// Irradiance at a receiver split by scattering order (W/m²).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Split {
+    /// Unscattered light.
+    pub direct: f64,
+    /// Exactly one scattering event.
+    pub single: f64,
+    /// Two to B events.
+    pub multiple: f64,
+}
+
+impl Split {
+    /// direct + single + multiple.
+    pub fn total(&self) -> f64 {
+        self.direct + self.single + self.multiple
+    }
+}
+
+/// Effective extinction-like coefficient of a ray crossing segments `(length, σ)`: Σ σ_i d_i / Σ d_i
+/// (dubouchet2019 Sec. 4.4). Zero for a zero-length ray.
+pub fn effective_sigma(segments: &[(f64, f64)]) -> f64 {
+    let length: f64 = segments.iter().map(|s| s.0).sum();
+    if length > 0.0 { segments.iter().map(|s| s.0 * s.1).sum::<f64>() / length } else { 0.0 }
+}
+
+fn finite_non_negative(name: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v >= 0.0 { Ok(v) } else { Err(format!("{name} = {v} must be finite and >= 0")) }
+}
+
+impl Response {
+    /// Irradiance of bounce `b ≥ 1` in canonical units at canonical distance `d` for a receiver whose
+    /// normal makes cosine `cos_n` with the light axis (order-N ZH · clamped cosine, Appendix A).
+    pub fn bounce_irradiance(&self, b: usize, d: f64, cos_n: f64) -> f64 {
+        let c = if cos_n.is_nan() { 0.0 } else { cos_n.clamp(-1.0, 1.0) };
+        let normal = [(1.0 - c * c).max(0.0).sqrt(), 0.0, c];
+        sh::zh_irradiance(&self.zh_at(b, d), [0.0, 0.0, 1.0], normal).max(0.0)
+    }
+
+    /// Irradiance in a real medium (see the module doc). `strength` is the point emitter's intensity
+    /// (W/sr) or the directional emitter's boundary irradiance (W/m²); `distance` is the emitter
+    /// distance or boundary depth in metres. Errors name a non-finite or negative argument.
+    pub fn irradiance_in(&self, medium: &Medium, strength: f64, distance: f64, cos_n: f64) -> Result<Split, String> {
+        let sigma_s = finite_non_negative("sigma_s", medium.sigma_s)?;
+        let sigma_a = finite_non_negative("sigma_a", medium.sigma_a)?;
+        let strength = finite_non_negative("strength", strength)?;
+        let distance = finite_non_negative("distance", distance)?;
+        if !cos_n.is_finite() {
+            return Err(format!("cos_n = {cos_n} must be finite"));
+        }
+        let cos = cos_n.clamp(-1.0, 1.0);
+        let sigma_t = sigma_s + sigma_a;
+        let dq = sigma_t * distance;
+        let geometric = match self.kind {
+            EmitterKind::Point if distance == 0.0 => {
+                return Err("a point emitter at distance 0 has no defined irradiance".into());
+            }
+            EmitterKind::Point => strength / (distance * distance),
+            EmitterKind::Directional => strength,
+        };
+        let direct = geometric * (-dq).exp() * cos.max(0.0);
+        if sigma_s == 0.0 || self.bounces.is_empty() {
+            return Ok(Split { direct, single: 0.0, multiple: 0.0 });
+        }
+        let albedo = sigma_s / sigma_t;
+        let scale = strength
+            * match self.kind {
+                EmitterKind::Point => sigma_t * sigma_t,
+                EmitterKind::Directional => 1.0,
+            };
+        let single = scale * albedo * self.bounce_irradiance(1, dq, cos);
+        let mut weight = albedo;
+        let mut multiple = 0.0;
+        for b in 2..=self.bounces.len() {
+            weight *= albedo;
+            if weight == 0.0 {
+                break;
+            }
+            multiple += scale * weight * self.bounce_irradiance(b, dq, cos);
+        }
+        Ok(Split { direct, single, multiple })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::zh_transport::{ResponseConfig, compute};
+    use crate::reference::walk;
+
+    fn response(kind: EmitterKind, g: f64, bounces: usize) -> Response {
+        let distances: Vec<f64> = (0..64).map(|i| 1e-3 * (32e3f64).powf(f64::from(i) / 63.0)).collect();
+        let cfg = ResponseConfig { bounces, ..ResponseConfig::new(g, distances) };
+        compute(kind, &cfg).unwrap()
+    }
+
+    /// The canonical medium with unit strength reproduces the canonical query exactly.
+    #[test]
+    fn canonical_medium_is_the_identity() {
+        let r = response(EmitterKind::Point, 0.3, 3);
+        let s = r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, 1.7, 0.4).unwrap();
+        let (d, single, multiple) = r.irradiance(1.7, 0.4);
+        assert!((s.direct - d).abs() <= 1e-15 * d && (s.single - single).abs() <= 1e-15 * single);
+        assert!((s.multiple - multiple).abs() <= 1e-14 * multiple);
+    }
+
+    /// σ-ratio remapping with absorption against the independent random walk in the real medium:
+    /// σ_s = 2/m, σ_a = 0.5/m, g = 0.5, emitter 0.6 m away (1.5 mean free paths).
+    #[test]
+    fn remapped_query_matches_the_walk_in_a_real_medium() {
+        let medium = walk::Medium { sigma_s: 2.0, sigma_a: 0.5, g: 0.5 };
+        for kind in [EmitterKind::Point, EmitterKind::Directional] {
+            let r = response(kind, 0.5, 6);
+            let emitter = match kind {
+                EmitterKind::Point => walk::Emitter::Point { intensity: 3.0, position: [0.0, 0.0, 0.6] },
+                EmitterKind::Directional => {
+                    walk::Emitter::Directional { irradiance: 3.0, toward_light: [0.0, 0.0, 1.0], depth: 0.6 }
+                }
+            };
+            for cos_n in [1.0, 0.0] {
+                let normal = [(1.0f64 - cos_n * cos_n).sqrt(), 0.0, cos_n];
+                let w = walk::irradiance(&emitter, &medium, normal, &walk::WalkConfig::new(200_000, 6, 11)).unwrap();
+                let q = r.irradiance_in(&Medium { sigma_s: 2.0, sigma_a: 0.5 }, 3.0, 0.6, cos_n).unwrap();
+                assert!((q.direct - w.direct).abs() <= 1e-12 * w.direct.max(1e-300), "{kind:?} direct");
+                let single = w.orders[0];
+                let err = (q.single - single.mean).abs();
+                assert!(
+                    err <= 0.03 * single.mean && err <= 4.0 * single.std_error + 1e-3 * single.mean,
+                    "{kind:?} cos {cos_n}: single {} vs {single:?}",
+                    q.single
+                );
+                let multiple: f64 = w.orders[1..].iter().map(|o| o.mean).sum();
+                let var: f64 = w.orders[1..].iter().map(|o| o.std_error * o.std_error).sum();
+                let err = (q.multiple - multiple).abs();
+                assert!(
+                    err <= 0.06 * multiple && err <= 4.0 * var.sqrt() + 0.01 * multiple,
+                    "{kind:?} cos {cos_n}: multiple {} vs {multiple} ± {}",
+                    q.multiple,
+                    var.sqrt()
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn limits_and_bad_input() {
+        let r = response(EmitterKind::Point, 0.0, 2);
+        // No scattering: only the attenuated direct term remains.
+        let s = r.irradiance_in(&Medium { sigma_s: 0.0, sigma_a: 2.0 }, 1.0, 0.5, 1.0).unwrap();
+        assert_eq!((s.single, s.multiple), (0.0, 0.0));
+        assert!((s.direct - 4.0 * (-1.0f64).exp()).abs() < 1e-15);
+        // Vacuum: inverse-square law, nothing scattered.
+        let s = r.irradiance_in(&Medium { sigma_s: 0.0, sigma_a: 0.0 }, 2.0, 2.0, 0.5).unwrap();
+        assert_eq!(s, Split { direct: 0.25, single: 0.0, multiple: 0.0 });
+        // σ_a ≫ σ_s: everything finite, non-negative, and scattering tiny.
+        let s = r.irradiance_in(&Medium { sigma_s: 1e-6, sigma_a: 1e3 }, 1.0, 0.01, -0.3).unwrap();
+        assert!(s.total().is_finite() && s.single >= 0.0 && s.multiple >= 0.0 && s.direct == 0.0);
+        // Far beyond the table: exponential tail, finite and below the nearer value.
+        let far = r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, 500.0, 1.0).unwrap();
+        let near = r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, 30.0, 1.0).unwrap();
+        assert!(far.total().is_finite() && far.total() <= near.total());
+        for bad in [f64::NAN, -1.0, f64::INFINITY] {
+            assert!(r.irradiance_in(&Medium { sigma_s: bad, sigma_a: 0.0 }, 1.0, 1.0, 1.0).is_err());
+            assert!(r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, bad, 1.0).is_err());
+        }
+        assert!(r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, 0.0, 1.0).is_err());
+    }
+
+    /// Sec. 4.4: the effective coefficient reproduces the transmittance of piecewise media exactly.
+    #[test]
+    fn effective_sigma_is_exact_for_transmittance() {
+        let segments = [(0.5, 2.0), (1.5, 0.1), (0.25, 8.0)];
+        let eff = effective_sigma(&segments);
+        let length: f64 = segments.iter().map(|s| s.0).sum();
+        let product: f64 = segments.iter().map(|s| (-s.0 * s.1).exp()).product();
+        assert!(((-eff * length).exp() - product).abs() < 1e-15);
+        assert_eq!(effective_sigma(&[]), 0.0);
+    }
+}
