@@ -24,6 +24,9 @@ cargo clippy --all-targets --locked -- -D warnings
 step "cargo test"
 cargo test --locked
 
+step "main job end to end: the full default pipeline (release, opt-in test)"
+cargo test --release --locked --test run_report -- --ignored
+
 step "cargo doc (warnings are errors)"
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --quiet
 

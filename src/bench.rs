@@ -66,6 +66,9 @@ fn median_ms<E>(n: usize, mut f: impl FnMut() -> Result<(), E>) -> Result<f64, E
 fn with_level(def: &TableDef, level: i32) -> TableDef {
     match def {
         TableDef::PhaseHg(p) => TableDef::PhaseHg(crate::tables::phase_hg::PhaseHg { zstd_level: level, ..p.clone() }),
+        TableDef::ZhResponse(p) => {
+            TableDef::ZhResponse(crate::tables::zh_response::ZhResponse { zstd_level: level, ..p.clone() })
+        }
     }
 }
 
@@ -118,6 +121,9 @@ pub fn run(p: &ValidatedPipeline) -> Result<Vec<BenchRow>, BenchError> {
             sizes.push(bytes);
             times.push(t);
         }
+        if let TableDef::ZhResponse(def) = table.def() {
+            rows.extend(zh_query_rows(table.id(), def, &generated)?);
+        }
         for (i, level) in [3, 19].into_iter().enumerate() {
             let k = if i == 0 { 0 } else { 2 };
             rows.push(BenchRow {
@@ -128,6 +134,76 @@ pub fn run(p: &ValidatedPipeline) -> Result<Vec<BenchRow>, BenchError> {
                 note: format!("size {level}/9 = {:.3}", sizes[k] as f64 / sizes[1] as f64),
             });
         }
+    }
+    Ok(rows)
+}
+
+/// Queries per configuration set in the ZH query benchmark.
+pub const ZH_QUERIES: usize = 200_000;
+
+/// Irradiance queries of a `ZhResponse` table on one thread: the O(N) Appendix A route the baker uses vs
+/// the full-SH route (rotate the lobe to world SH, dot with the rotated clamped cosine). Random media
+/// (albedo in [0.5, 1], g within the table), distances in [0.01, 10] mfp, normals on the sphere, drawn
+/// from counter-based streams (the same set for both routes).
+fn zh_query_rows(
+    id: &str,
+    def: &crate::tables::zh_response::ZhResponse,
+    generated: &crate::tables::Generated,
+) -> Result<Vec<BenchRow>, BenchError> {
+    use crate::physics::rng::StreamKey;
+    use crate::physics::sh;
+    use crate::tables::zh_response::{Emitter, Medium, QueryOptions, Receiver, ZhResponseTable};
+    let table = ZhResponseTable::from_arrays(def, &generated.arrays, &generated.values).map_err(BenchError::Variant)?;
+    let (g_lo, g_hi) = (table.g[0], table.g[table.g.len() - 1]);
+    let mut rows = Vec::new();
+    for &profile in &table.emitters {
+        let queries: Vec<(Medium, Emitter, Receiver)> = (0..ZH_QUERIES as u64)
+            .map(|i| {
+                let k = StreamKey { table: 0x9e37, cell: i };
+                let u = |dim| k.uniform(0, dim);
+                let sigma_t = 1.0;
+                let albedo = 0.5 + 0.5 * u(0);
+                let medium = Medium {
+                    sigma_s: albedo * sigma_t,
+                    sigma_a: (1.0 - albedo) * sigma_t,
+                    g: g_lo + (g_hi - g_lo) * u(1),
+                };
+                let d = 0.01 * 1000f64.powf(u(2));
+                let emitter = match profile {
+                    crate::tables::zh_response::EmitterProfile::Point => {
+                        Emitter::Point { intensity: 1.0, position: [0.0, 0.0, d] }
+                    }
+                    crate::tables::zh_response::EmitterProfile::Directional => {
+                        Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
+                    }
+                };
+                let z = 2.0 * u(3) - 1.0;
+                let phi = std::f64::consts::TAU * u(4);
+                let s = (1.0 - z * z).sqrt();
+                (medium, emitter, Receiver { position: [0.0; 3], normal: [s * phi.cos(), s * phi.sin(), z] })
+            })
+            .collect();
+        let opts = QueryOptions::default();
+        let t = Instant::now();
+        for (m, e, r) in &queries {
+            std::hint::black_box(table.irradiance(m, e, r, &opts).map_err(|x| BenchError::Variant(x.to_string()))?);
+        }
+        let fast = ms(t);
+        let cosine = sh::clamped_cosine_zh(table.order);
+        let t = Instant::now();
+        for (m, e, r) in &queries {
+            let rad = table.radiance(m, e, r, &opts).map_err(|x| BenchError::Variant(x.to_string()))?;
+            std::hint::black_box(sh::sh_dot(&rad.sh, &sh::zh_rotate(&cosine, r.normal)));
+        }
+        let full = ms(t);
+        let per_s = ZH_QUERIES as f64 / (fast * 1e-3);
+        rows.push(BenchRow {
+            what: format!("zh query {id} {profile:?}: full SH vs O(N)"),
+            baseline_ms: full,
+            candidate_ms: fast,
+            speedup: full / fast,
+            note: format!("{ZH_QUERIES} queries on 1 thread: {:.2} M/s per core (target >= 5)", per_s / 1e6),
+        });
     }
     Ok(rows)
 }

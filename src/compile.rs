@@ -161,6 +161,7 @@ pub fn encode_table(t: &ValidatedTable, g: &Generated) -> Result<container::Enco
 fn zstd_level(def: &TableDef) -> i32 {
     match def {
         TableDef::PhaseHg(p) => p.zstd_level,
+        TableDef::ZhResponse(p) => p.zstd_level,
     }
 }
 

@@ -108,6 +108,12 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Evaluate a compiled table at one configuration.
+    Eval {
+        /// What to evaluate.
+        #[command(subcommand)]
+        what: EvalCommand,
+    },
     /// Evaluate every formula on extreme inputs and print the matrix.
     Stability {
         /// Print passing rows too.
@@ -123,6 +129,103 @@ enum Command {
         #[arg(long)]
         check: bool,
     },
+}
+
+#[derive(Subcommand)]
+enum EvalCommand {
+    /// Irradiance from a ZhResponse table on a receiver at --distance from the light (point) or below the
+    /// medium boundary (directional), its normal at --normal-angle from the direction toward the light.
+    Zh(EvalZh),
+}
+
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+struct EvalZh {
+    /// A compiled ZhResponse table (.vtab).
+    #[arg(long)]
+    table: PathBuf,
+    /// Emitter profile.
+    #[arg(long, value_enum)]
+    emitter: EvalEmitter,
+    /// Point: intensity (W/sr). Directional: irradiance at the medium boundary (W/m^2).
+    #[arg(long, default_value_t = 1.0)]
+    intensity: f64,
+    /// Distance to the point light, or depth below the boundary toward the directional light (m).
+    #[arg(long)]
+    distance: f64,
+    /// Angle between the receiver normal and the direction toward the light (degrees).
+    #[arg(long, default_value_t = 0.0)]
+    normal_angle: f64,
+    /// Scattering coefficient (1/m).
+    #[arg(long)]
+    sigma_s: f64,
+    /// Absorption coefficient (1/m).
+    #[arg(long, default_value_t = 0.0)]
+    sigma_a: f64,
+    /// HG mean cosine, within the table's g range.
+    #[arg(long, default_value_t = 0.0)]
+    g: f64,
+    /// Apply the table's back-scatter shift (dubouchet2019 Sec. 5.2; a surface heuristic, off for a
+    /// receiver inside the medium).
+    #[arg(long)]
+    backscatter: bool,
+    /// Leave out the tail closure (orders beyond the table's B).
+    #[arg(long)]
+    no_tail: bool,
+    /// Similarity relation (1 - g) sigma_s, g = 0 for the multiple-scattering orders.
+    #[arg(long)]
+    similarity: bool,
+    /// Highest scattering order summed (default: all the table holds).
+    #[arg(long)]
+    max_bounce: Option<usize>,
+    /// Print JSON (keys: direct, single, multiple, tail, total).
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum EvalEmitter {
+    Point,
+    Directional,
+}
+
+fn eval_zh(a: &EvalZh) -> Result<()> {
+    use voltab::tables::zh_response::{Emitter, EmitterProfile, Medium, QueryOptions, Receiver, ZhResponseTable};
+    let profile = match a.emitter {
+        EvalEmitter::Point => EmitterProfile::Point,
+        EvalEmitter::Directional => EmitterProfile::Directional,
+    };
+    let table = ZhResponseTable::open(&a.table, Some(&[profile]), Some(&[a.g])).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let theta = a.normal_angle.to_radians();
+    let receiver = Receiver { position: [0.0; 3], normal: [theta.sin(), 0.0, theta.cos()] };
+    let emitter = match a.emitter {
+        EvalEmitter::Point => Emitter::Point { intensity: a.intensity, position: [0.0, 0.0, a.distance] },
+        EvalEmitter::Directional => {
+            Emitter::Directional { irradiance: a.intensity, toward_light: [0.0, 0.0, 1.0], depth: a.distance }
+        }
+    };
+    if !(a.distance.is_finite() && a.distance >= 0.0) {
+        bail!("--distance {} must be finite and >= 0 (metres)", a.distance);
+    }
+    let medium = Medium { sigma_s: a.sigma_s, sigma_a: a.sigma_a, g: a.g };
+    let opts = QueryOptions {
+        backscatter: a.backscatter,
+        tail: !a.no_tail,
+        similarity: a.similarity,
+        max_bounce: a.max_bounce,
+    };
+    let r = table
+        .irradiance(&medium, &emitter, &receiver, &opts)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", a.table.display()))?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        println!("direct    {:.6e} W/m^2", r.direct);
+        println!("single    {:.6e} W/m^2", r.single);
+        println!("multiple  {:.6e} W/m^2  (b >= 2, of which tail b > {}: {:.6e})", r.multiple, table.bounces, r.tail);
+        println!("total     {:.6e} W/m^2", r.total);
+    }
+    Ok(())
 }
 
 fn main() -> ExitCode {
@@ -286,6 +389,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 print!("{}", voltab::bench::render(&rows));
             }
         }
+        Command::Eval { what: EvalCommand::Zh(a) } => eval_zh(&a)?,
         Command::Stability { all } => {
             let rows = voltab::stability::rows();
             let failed = rows.iter().filter(|r| !r.ok()).count();

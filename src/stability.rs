@@ -71,5 +71,6 @@ impl fmt::Display for Row {
 pub fn rows() -> Vec<Row> {
     let mut v = Vec::new();
     v.extend(crate::tables::phase_hg::stability_rows());
+    v.extend(crate::tables::zh_response::stability_rows());
     v
 }

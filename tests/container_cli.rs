@@ -142,10 +142,10 @@ fn unknown_kinds_and_newer_layouts_are_refused_by_verify() {
         std::fs::write(&p, bytes).unwrap();
         p
     };
-    let o = run(&["verify", make("ZhResponse", 1).to_str().unwrap()]);
+    let o = run(&["verify", make("FutureKind", 1).to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
     assert!(
-        text(&o).contains("unknown table kind `ZhResponse`") && text(&o).contains("upgrade voltab"),
+        text(&o).contains("unknown table kind `FutureKind`") && text(&o).contains("upgrade voltab"),
         "{}",
         text(&o)
     );
@@ -153,7 +153,7 @@ fn unknown_kinds_and_newer_layouts_are_refused_by_verify() {
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("layout version 99 is newer"), "{}", text(&o));
     // inspect still shows the header of a table it cannot consume, with a warning.
-    let o = run(&["inspect", make("ZhResponse", 1).to_str().unwrap()]);
+    let o = run(&["inspect", make("FutureKind", 1).to_str().unwrap()]);
     assert!(o.status.success() && text(&o).contains("warning         unknown table kind"), "{}", text(&o));
 }
 

@@ -9,18 +9,27 @@ use super::params::FieldDoc;
 use super::parse::PipelineFile;
 use crate::stages::plot_phase::{PlotPhase, PlotPhaseRaw};
 use crate::tables::phase_hg::{PhaseHg, PhaseHgRaw};
+use crate::tables::zh_response::{ZhResponse, ZhResponseRaw};
 
 /// (kind, what it is, fields, defaults) of one kind.
 type KindDoc = (&'static str, &'static str, &'static [FieldDoc], Vec<(&'static str, Value)>);
 
 /// Every table kind.
 fn table_kinds() -> Vec<KindDoc> {
-    vec![(
-        PhaseHgRaw::KIND,
-        "Henyey-Greenstein phase tables: phase value f(mu,g), per-azimuth cumulative F_hg (elek2014), inverse CDF mu(xi,g), ZH and Legendre coefficients; one chunk per g.",
-        PhaseHgRaw::FIELDS,
-        PhaseHg::defaults_json(),
-    )]
+    vec![
+        (
+            PhaseHgRaw::KIND,
+            "Henyey-Greenstein phase tables: phase value f(mu,g), per-azimuth cumulative F_hg (elek2014), inverse CDF mu(xi,g), ZH and Legendre coefficients; one chunk per g.",
+            PhaseHgRaw::FIELDS,
+            PhaseHg::defaults_json(),
+        ),
+        (
+            ZhResponseRaw::KIND,
+            "ZH impulse-response tables (dubouchet2019 Sec. 4-5): per emitter profile and HG g, the ZH coefficients of the incident radiance after each bounce b = 1..B, their sum and the direct term, over distance in mean free paths; one chunk per g. Convention: canonical medium sigma_s = 1, sigma_a = 0; a point emitter has intensity 1 W/sr, a directional emitter delivers 1 W/m^2 at the medium boundary; receiver irradiance E = integral of L(w) max(0, n.w) dw. The direct term of a point emitter is stored as irradiance e^-d/d^2 per unit cosine, never as a lobe.",
+            ZhResponseRaw::FIELDS,
+            ZhResponse::defaults_json(),
+        ),
+    ]
 }
 
 /// Same for stage kinds.

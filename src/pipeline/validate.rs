@@ -427,6 +427,7 @@ pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipe
 fn set_preset(d: &mut TableDecl, p: Option<String>) {
     match d {
         TableDecl::PhaseHg(r) => r.preset = p,
+        TableDecl::ZhResponse(r) => r.preset = p,
     }
 }
 

@@ -10,6 +10,7 @@
 //! [`TableDef`], and the match arms below.
 
 pub mod phase_hg;
+pub mod zh_response;
 
 use serde::{Deserialize, Serialize};
 
@@ -21,6 +22,8 @@ use crate::container::{ArrayDesc, ArrayValues};
 pub enum TableDecl {
     /// Henyey–Greenstein phase tables (phase value, cumulative, inverse CDF, ZH coefficients).
     PhaseHg(phase_hg::PhaseHgRaw),
+    /// ZH impulse-response tables of dubouchet2019 (per emitter, g, bounce and distance).
+    ZhResponse(zh_response::ZhResponseRaw),
 }
 
 /// A resolved table definition: every parameter present. Its canonical RON is hashed into the
@@ -30,6 +33,8 @@ pub enum TableDecl {
 pub enum TableDef {
     /// See [`phase_hg`].
     PhaseHg(phase_hg::PhaseHg),
+    /// See [`zh_response`].
+    ZhResponse(zh_response::ZhResponse),
 }
 
 /// A problem with one field's value, found by a kind's own validation.
@@ -114,16 +119,18 @@ impl TableDecl {
     pub fn kind(&self) -> &'static str {
         match self {
             TableDecl::PhaseHg(_) => phase_hg::PhaseHgRaw::KIND,
+            TableDecl::ZhResponse(_) => zh_response::ZhResponseRaw::KIND,
         }
     }
 
     /// All kind names, for "did you mean".
-    pub const KINDS: &'static [&'static str] = &[phase_hg::PhaseHgRaw::KIND];
+    pub const KINDS: &'static [&'static str] = &[phase_hg::PhaseHgRaw::KIND, zh_response::ZhResponseRaw::KIND];
 
     /// Field names of this kind (without `id`/`preset`).
     pub fn field_names(&self) -> Vec<&'static str> {
         match self {
             TableDecl::PhaseHg(_) => phase_hg::PhaseHgRaw::FIELDS.iter().map(|f| f.name).collect(),
+            TableDecl::ZhResponse(_) => zh_response::ZhResponseRaw::FIELDS.iter().map(|f| f.name).collect(),
         }
     }
 
@@ -131,6 +138,7 @@ impl TableDecl {
     pub fn id(&self) -> Option<&str> {
         match self {
             TableDecl::PhaseHg(r) => r.id.as_deref(),
+            TableDecl::ZhResponse(r) => r.id.as_deref(),
         }
     }
 
@@ -138,6 +146,7 @@ impl TableDecl {
     pub fn preset(&self) -> Option<&str> {
         match self {
             TableDecl::PhaseHg(r) => r.preset.as_deref(),
+            TableDecl::ZhResponse(r) => r.preset.as_deref(),
         }
     }
 
@@ -145,6 +154,7 @@ impl TableDecl {
     pub fn set_fields(&self) -> Vec<&'static str> {
         match self {
             TableDecl::PhaseHg(r) => r.set_fields(),
+            TableDecl::ZhResponse(r) => r.set_fields(),
         }
     }
 
@@ -152,6 +162,8 @@ impl TableDecl {
     pub fn merged_over(&self, base: &TableDecl) -> Option<TableDecl> {
         match (self, base) {
             (TableDecl::PhaseHg(a), TableDecl::PhaseHg(b)) => Some(TableDecl::PhaseHg(a.merged_over(b))),
+            (TableDecl::ZhResponse(a), TableDecl::ZhResponse(b)) => Some(TableDecl::ZhResponse(a.merged_over(b))),
+            _ => None,
         }
     }
 
@@ -159,6 +171,7 @@ impl TableDecl {
     pub fn resolve(&self) -> TableDef {
         match self {
             TableDecl::PhaseHg(r) => TableDef::PhaseHg(r.resolve()),
+            TableDecl::ZhResponse(r) => TableDef::ZhResponse(r.resolve()),
         }
     }
 }
@@ -168,6 +181,7 @@ impl TableDef {
     pub fn kind(&self) -> &'static str {
         match self {
             TableDef::PhaseHg(_) => phase_hg::PhaseHgRaw::KIND,
+            TableDef::ZhResponse(_) => zh_response::ZhResponseRaw::KIND,
         }
     }
 
@@ -175,6 +189,7 @@ impl TableDef {
     pub fn kind_schema_version(&self) -> u32 {
         match self {
             TableDef::PhaseHg(_) => phase_hg::KIND_SCHEMA_VERSION,
+            TableDef::ZhResponse(_) => zh_response::KIND_SCHEMA_VERSION,
         }
     }
 
@@ -182,6 +197,7 @@ impl TableDef {
     pub fn generator_version(&self) -> &'static str {
         match self {
             TableDef::PhaseHg(_) => phase_hg::GENERATOR_VERSION,
+            TableDef::ZhResponse(_) => zh_response::GENERATOR_VERSION,
         }
     }
 
@@ -189,6 +205,7 @@ impl TableDef {
     pub fn validate(&self) -> Vec<FieldIssue> {
         match self {
             TableDef::PhaseHg(p) => p.validate(),
+            TableDef::ZhResponse(p) => p.validate(),
         }
     }
 
@@ -196,6 +213,7 @@ impl TableDef {
     pub fn estimated_bytes(&self) -> u128 {
         match self {
             TableDef::PhaseHg(p) => p.estimated_bytes(),
+            TableDef::ZhResponse(p) => p.estimated_bytes(),
         }
     }
 
@@ -203,6 +221,7 @@ impl TableDef {
     pub fn work_units(&self) -> u64 {
         match self {
             TableDef::PhaseHg(p) => p.work_units(),
+            TableDef::ZhResponse(p) => p.work_units(),
         }
     }
 
@@ -217,6 +236,7 @@ impl TableDef {
     pub fn generate(&self, key: &[u8; 32], progress: Progress<'_>) -> Result<Generated, GenerateError> {
         match self {
             TableDef::PhaseHg(p) => p.generate(key, progress),
+            TableDef::ZhResponse(p) => p.generate(key, progress),
         }
     }
 }
@@ -226,6 +246,7 @@ impl TableDef {
     pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
         match self {
             TableDef::PhaseHg(p) => p.estimate_errors(generated, key),
+            TableDef::ZhResponse(p) => p.estimate_errors(generated, key),
         }
     }
 
@@ -233,6 +254,9 @@ impl TableDef {
     pub fn report_ladder(&self) -> Vec<(String, TableDef)> {
         match self {
             TableDef::PhaseHg(p) => p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::PhaseHg(d))).collect(),
+            TableDef::ZhResponse(p) => {
+                p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::ZhResponse(d))).collect()
+            }
         }
     }
 
@@ -240,6 +264,9 @@ impl TableDef {
     pub fn report_error_name(&self) -> &'static str {
         match self {
             TableDef::PhaseHg(_) => "max relative error of interpolated phase lookups vs double-double reference",
+            TableDef::ZhResponse(_) => {
+                "max relative error of the irradiance on a receiver facing the light vs the random-walk reference"
+            }
         }
     }
 
@@ -247,6 +274,7 @@ impl TableDef {
     pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, String> {
         match self {
             TableDef::PhaseHg(p) => p.report_measure(generated),
+            TableDef::ZhResponse(p) => p.report_measure(generated),
         }
     }
 }
@@ -255,6 +283,7 @@ impl TableDef {
 pub fn check_known_kind(h: &crate::container::Header) -> Result<(), String> {
     let supported = match h.kind.as_str() {
         k if k == phase_hg::PhaseHgRaw::KIND => phase_hg::KIND_SCHEMA_VERSION,
+        k if k == zh_response::ZhResponseRaw::KIND => zh_response::KIND_SCHEMA_VERSION,
         other => {
             return Err(format!(
                 "unknown table kind `{other}`: voltab {} reads {}; upgrade voltab to use this table",

@@ -151,6 +151,18 @@ pub struct Response {
 /// A message naming the offending parameter when `g`, `order`, the node counts or the distances are out
 /// of range (see [`ResponseConfig`]).
 pub fn compute(kind: EmitterKind, cfg: &ResponseConfig) -> Result<Response, String> {
+    compute_with_progress(kind, cfg, &|| {})
+}
+
+/// [`compute`], calling `bounce_done` after each bounce (for progress displays).
+///
+/// # Errors
+/// As [`compute`].
+pub fn compute_with_progress(
+    kind: EmitterKind,
+    cfg: &ResponseConfig,
+    bounce_done: &(dyn Fn() + Sync),
+) -> Result<Response, String> {
     hg::validate_g(cfg.g)?;
     if !(1..=sh::MAX_ORDER).contains(&cfg.order) {
         return Err(format!("order = {} is out of range: valid range is [1, {}]", cfg.order, sh::MAX_ORDER));
@@ -182,6 +194,7 @@ pub fn compute(kind: EmitterKind, cfg: &ResponseConfig) -> Result<Response, Stri
     for b in 1..=cfg.bounces {
         let table: Vec<Vec<f64>> = cfg.distances.par_iter().map(|&d| ctx.coefficients(kind, &response, b, d)).collect();
         response.bounces.push(table);
+        bounce_done();
     }
     Ok(response)
 }
@@ -354,7 +367,7 @@ impl Response {
     }
 
     /// [`Response::zh_at`] into `out` (length = order), for `1 ≤ b ≤ bounces.len()`.
-    fn lookup_into(&self, b: usize, d: f64, out: &mut [f64]) {
+    pub(crate) fn lookup_into(&self, b: usize, d: f64, out: &mut [f64]) {
         let rows = &self.bounces[b - 1];
         let ds = &self.distances;
         let d = if d.is_nan() { f64::INFINITY } else { d.max(1e-150) };

@@ -1,0 +1,630 @@
+//! `ZhResponse`: zonal-harmonic impulse-response tables of dubouchet2019 Sec. 4–5 (Eqs. 14–15, the
+//! bounce recursion of Sec. 5.1), the table the lightmap baker consumes.
+//!
+//! **Input → output.** A validated [`ZhResponse`] definition (emitter profiles, HG g list, bounce count
+//! `B`, ZH order `N`, distance axis, quadrature size) → per emitter profile `p` three arrays, each
+//! chunked per g slice so a consumer decompresses only the g it needs:
+//! - `{p}_direct[g, d]` — the unscattered irradiance per unit `max(0, n·a)` of a unit emitter in the
+//!   canonical medium: `e^{−d}/d²` (point), `e^{−D}` (directional). Stored as irradiance, never as a lobe
+//!   (the point emitter's direct light is a delta);
+//! - `{p}_zh[g, b, d, l]` — ZH coefficients (about the light axis `a`) of the radiance arriving after
+//!   exactly `b = 1..=B` scattering events, so a consumer can pick orders and weight them by `α^b`;
+//! - `{p}_zh_sum[g, d, l]` — their sum over `b`, the single combined table of Sec. 5.1 (conservative media).
+//!
+//! With the tail closure on, `{p}_tail[g, albedo, d, l]` adds the ZH (`l = 0, 1`) of all orders `b > B`
+//! on a small albedo axis (see [`crate::physics::zh_transport::tail`]).
+//!
+//! **Canonical medium and units.** `σ_s = 1`, `σ_a = 0`, lengths in mean free paths. A point emitter has
+//! intensity 1 W/sr at distance `d`; a directional emitter delivers irradiance 1 W/m² at the boundary of
+//! the half-space medium, the receiver lying `D` below it. The receiver irradiance is
+//! `E = ∫ L(ω) max(0, n·ω) dω`. Everything physical (σ-ratio remapping, albedo weights, g interpolation,
+//! similarity, back-scatter shift) happens at query time in [`ZhResponseTable`]; the transport itself is
+//! [`crate::physics::zh_transport`] (deterministic quadrature; derivations in its module doc and in
+//! `docs/design/zh-response.md`).
+//!
+//! **Errors.** [`ZhResponse::estimate_errors`] judges the tables against the independent random walk
+//! [`crate::reference::walk`] (single scattering and the sum of orders `≤ B` on a receiver facing the
+//! light); the report ladder varies the distance resolution and the quadrature size.
+
+mod table;
+#[cfg(test)]
+mod tests;
+
+use std::collections::HashMap;
+use std::sync::{Mutex, OnceLock};
+
+use serde::{Deserialize, Serialize};
+
+pub use table::{
+    Emitter, Irradiance, Medium, QueryError, QueryOptions, Radiance, Receiver, ZhReadError, ZhResponseTable,
+    array_names,
+};
+
+use super::phase_hg::{Element, GValues};
+use super::{ErrorEstimate, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
+use crate::container::{ArrayDesc, Axis};
+use crate::physics::zh_transport::{self, EmitterKind, ResponseConfig};
+use crate::reference::walk;
+
+/// Version of the array layout below.
+pub const KIND_SCHEMA_VERSION: u32 = 1;
+/// Version of the numerics; bump when values change so caches rebuild.
+pub const GENERATOR_VERSION: &str = "zh_response/1";
+
+/// Most g slices one table may hold.
+pub const MAX_G: usize = 64;
+/// Largest `|g|` accepted (an order-11 ZH cannot represent sharper lobes anyway).
+pub const MAX_ABS_G: f64 = 0.99;
+/// Highest ZH order `N`.
+pub const MAX_ORDER: u32 = 32;
+/// Most bounces `B`.
+pub const MAX_BOUNCES: u32 = 64;
+
+/// Which canonical emitter a set of arrays is for (dubouchet2019 Fig. 4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, schemars::JsonSchema)]
+pub enum EmitterProfile {
+    /// Isotropic point light, intensity 1 W/sr, infinite medium; axis = distance to the light.
+    Point,
+    /// Collimated light of irradiance 1 W/m² entering a half-space; axis = depth below the boundary.
+    Directional,
+}
+
+impl EmitterProfile {
+    /// Prefix of this profile's array names.
+    pub fn prefix(self) -> &'static str {
+        match self {
+            EmitterProfile::Point => "point",
+            EmitterProfile::Directional => "directional",
+        }
+    }
+
+    /// The transport module's emitter.
+    pub fn transport(self) -> EmitterKind {
+        match self {
+            EmitterProfile::Point => EmitterKind::Point,
+            EmitterProfile::Directional => EmitterKind::Directional,
+        }
+    }
+
+    /// All profiles.
+    pub const ALL: [EmitterProfile; 2] = [EmitterProfile::Point, EmitterProfile::Directional];
+}
+
+/// Spacing of the distance axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+pub enum DistanceSpacing {
+    /// Geometric: the same relative resolution near the light (single scattering ~1/d) and far away.
+    Log,
+    /// Uniform in distance.
+    Linear,
+}
+
+crate::declare_params! {
+    /// ZH impulse-response tables (dubouchet2019 Sec. 4–5): per emitter profile and HG g, the ZH
+    /// coefficients of the incident radiance after each bounce, their sum, and the direct term.
+    raw ZhResponseRaw => resolved ZhResponse, kind "ZhResponse" {
+        /// Emitter profiles to tabulate, each at most once: `[Point, Directional]`.
+        emitters: Vec<EmitterProfile> = EmitterProfile::ALL.to_vec(), unit = "", range = "1 or 2 distinct of Point | Directional";
+        /// HG mean cosines of the slices: a strictly increasing list or a grid `(min, max, count)`.
+        /// Queries interpolate between slices and refuse g outside the tabulated range.
+        g: GValues = GValues::List(vec![-0.5, 0.0, 0.5]), unit = "dimensionless (mean cosine)", range = "each |g| <= 0.99; 1 to 64 values, strictly increasing";
+        /// Scattering orders tabulated separately (b = 1 … bounces); orders beyond go to the tail closure.
+        bounces: u32 = 10, unit = "scattering events", range = "1 to 64";
+        /// ZH coefficients per lobe (bands l = 0 … zh_order − 1).
+        zh_order: u32 = 11, unit = "bands", range = "1 to 32";
+        /// Samples on the distance (point) / depth (directional) axis.
+        distance_bins: u32 = 256, unit = "samples", range = "4 to 4096";
+        /// First distance sample.
+        distance_min: f64 = 1e-3, unit = "mean free paths", range = "1e-6 to 1, below distance_max";
+        /// Last distance sample; beyond it lookups decay as e^{-Δd} (never clamped upward).
+        distance_max: f64 = 64.0, unit = "mean free paths", range = "1 to 1000";
+        /// Spacing of the distance axis: `Log` or `Linear`.
+        distance_spacing: DistanceSpacing = DistanceSpacing::Log, unit = "", range = "Log | Linear";
+        /// Gauss nodes per panel of the graded quadrature, in both the receiver angle and along rays
+        /// (12 changes bounce 1 by < 1e-6 and bounce 2 by < 1e-4 of c_0 when doubled).
+        quadrature_nodes: u32 = 12, unit = "nodes per panel", range = "2 to 64";
+        /// Back-scatter compensation of Sec. 5.2: scattered light is looked up for a receiver shifted
+        /// this far along its normal (the direct term is not); 0 switches it off.
+        backscatter_shift: f64 = 0.125, unit = "mean free paths", range = "0 (off) to 1";
+        /// Stored element type.
+        element: Element = Element::F32, unit = "", range = "F32 | F64";
+        /// zstd compression level.
+        zstd_level: i32 = 9, unit = "", range = "1 to 19";
+    }
+}
+
+impl ZhResponse {
+    /// Range checks of every field.
+    pub fn validate(&self) -> Vec<FieldIssue> {
+        let mut issues = Vec::new();
+        let mut issue = |field: &'static str, message: String, help: String| {
+            issues.push(FieldIssue { field, message, help });
+        };
+        if self.emitters.is_empty() {
+            issue("emitters", "emitters is empty".into(), "list at least one of Point, Directional".into());
+        }
+        let mut seen = std::collections::BTreeSet::new();
+        for e in &self.emitters {
+            if !seen.insert(*e) {
+                issue("emitters", format!("{e:?} is listed twice"), "list each emitter profile once".into());
+            }
+        }
+        let count_ok = match &self.g {
+            GValues::List(v) => !v.is_empty() && v.len() <= MAX_G,
+            GValues::Grid { count, .. } => (1..=MAX_G).contains(&(*count as usize)),
+        };
+        if !count_ok {
+            issue("g", "the g list is empty or too long".into(), format!("give between 1 and {MAX_G} g values"));
+        } else {
+            let gs = self.g.values();
+            if let Some(bad) = gs.iter().find(|g| !(g.is_finite() && g.abs() <= MAX_ABS_G)) {
+                issue(
+                    "g",
+                    format!("g = {bad} is out of range"),
+                    format!(
+                        "each g must satisfy |g| <= {MAX_ABS_G} (order-{} ZH cannot resolve sharper lobes)",
+                        self.zh_order
+                    ),
+                );
+            }
+            if gs.windows(2).any(|w| w[0] >= w[1]) || gs.iter().any(|g| g.is_nan()) {
+                issue("g", "g values must be strictly increasing".into(), "sort the list and remove duplicates".into());
+            }
+        }
+        if !(1..=MAX_BOUNCES).contains(&self.bounces) {
+            issue("bounces", format!("bounces = {} is out of range", self.bounces), format!("use 1 to {MAX_BOUNCES}"));
+        }
+        if !(1..=MAX_ORDER).contains(&self.zh_order) {
+            issue("zh_order", format!("zh_order = {} is out of range", self.zh_order), format!("use 1 to {MAX_ORDER}"));
+        }
+        if !(4..=4096).contains(&self.distance_bins) {
+            issue(
+                "distance_bins",
+                format!("distance_bins = {} is out of range", self.distance_bins),
+                "use 4 to 4096".into(),
+            );
+        }
+        if !(1e-6..=1.0).contains(&self.distance_min) {
+            issue(
+                "distance_min",
+                format!("distance_min = {} is out of range", self.distance_min),
+                "use 1e-6 to 1 mean free paths".into(),
+            );
+        }
+        if !(1.0..=1000.0).contains(&self.distance_max) {
+            issue(
+                "distance_max",
+                format!("distance_max = {} is out of range", self.distance_max),
+                "use 1 to 1000 mean free paths".into(),
+            );
+        }
+        if self.distance_min >= self.distance_max {
+            issue(
+                "distance_min",
+                format!("distance_min = {} is not below distance_max = {}", self.distance_min, self.distance_max),
+                "distance_min must be smaller than distance_max".into(),
+            );
+        }
+        if !(2..=64).contains(&self.quadrature_nodes) {
+            issue(
+                "quadrature_nodes",
+                format!("quadrature_nodes = {} is out of range", self.quadrature_nodes),
+                "use 2 to 64 Gauss nodes per panel (12 is converged to ~1e-4)".into(),
+            );
+        }
+        if !(0.0..=1.0).contains(&self.backscatter_shift) {
+            issue(
+                "backscatter_shift",
+                format!("backscatter_shift = {} is out of range", self.backscatter_shift),
+                "use 0 (off) to 1 mean free path; the paper uses 0.125".into(),
+            );
+        }
+        if !(1..=19).contains(&self.zstd_level) {
+            issue("zstd_level", format!("zstd_level = {} is out of range", self.zstd_level), "use 1 to 19".into());
+        }
+        issues
+    }
+
+    fn n_g(&self) -> u128 {
+        match &self.g {
+            GValues::List(v) => v.len() as u128,
+            GValues::Grid { count, .. } => u128::from(*count),
+        }
+    }
+
+    /// Peak memory: the f64 responses of one slice while computing, plus every stored value three
+    /// times (f64 working copy, element copy, compressed output bounded by raw).
+    pub fn estimated_bytes(&self) -> u128 {
+        let lobes = u128::from(self.bounces) + 1;
+        let per_g = self.emitters.len() as u128 * (lobes * u128::from(self.distance_bins) * u128::from(self.zh_order));
+        self.n_g() * per_g * 24 + per_g * 8
+    }
+
+    /// One unit per bounce of every (g, emitter) response.
+    pub fn work_units(&self) -> u64 {
+        (self.n_g() as u64) * self.emitters.len() as u64 * u64::from(self.bounces)
+    }
+
+    /// The distance axis (its values are exactly the distances the transport is computed at).
+    pub fn distance_axis(&self) -> Axis {
+        let n = u64::from(self.distance_bins);
+        match self.distance_spacing {
+            DistanceSpacing::Log => Axis::log("d", "mean free paths", self.distance_min, self.distance_max, n),
+            DistanceSpacing::Linear => Axis::linear("d", "mean free paths", self.distance_min, self.distance_max, n),
+        }
+    }
+
+    fn transport_config(&self, g: f64) -> ResponseConfig {
+        let mut cfg = ResponseConfig::new(g, self.distance_axis().values_vec());
+        cfg.order = self.zh_order as usize;
+        cfg.bounces = self.bounces as usize;
+        cfg.mu_nodes = self.quadrature_nodes as usize;
+        cfg.t_nodes = self.quadrature_nodes as usize;
+        cfg
+    }
+
+    fn descs(&self) -> Vec<ArrayDesc> {
+        let g_axis = Axis::explicit("g", "", self.g.values());
+        let b_axis = Axis::linear("b", "scattering events", 1.0, f64::from(self.bounces), u64::from(self.bounces));
+        let d_axis = self.distance_axis();
+        let l_axis =
+            Axis::linear("l", "band", 0.0, f64::from(self.zh_order.saturating_sub(1)), u64::from(self.zh_order));
+        let desc = |name: String, description: String, unit: &str, axes: Vec<Axis>| ArrayDesc {
+            name,
+            description,
+            unit: unit.into(),
+            element: self.element.into(),
+            axes,
+            quantization: None,
+        };
+        let mut out = Vec::new();
+        for e in &self.emitters {
+            let p = e.prefix();
+            let direct = match e {
+                EmitterProfile::Point => "e^-d/d^2",
+                EmitterProfile::Directional => "e^-D",
+            };
+            out.push(desc(
+                format!("{p}_direct"),
+                format!(
+                    "unscattered irradiance per unit max(0, n.a) of a unit {p} emitter, canonical medium: {direct}"
+                ),
+                "W/m^2",
+                vec![g_axis.clone(), d_axis.clone()],
+            ));
+            out.push(desc(
+                format!("{p}_zh"),
+                format!("ZH coefficients about the light axis of the radiance after exactly b scattering events ({p} emitter)"),
+                "W/(m^2 sr)",
+                vec![g_axis.clone(), b_axis.clone(), d_axis.clone(), l_axis.clone()],
+            ));
+            out.push(desc(
+                format!("{p}_zh_sum"),
+                format!("sum over b = 1..B of {p}_zh: the combined table of dubouchet2019 Sec. 5.1 (albedo 1)"),
+                "W/(m^2 sr)",
+                vec![g_axis.clone(), d_axis.clone(), l_axis.clone()],
+            ));
+        }
+        out
+    }
+
+    /// Runs the generator: per g slice and emitter the bounce recursion of
+    /// [`zh_transport::compute_with_progress`] (parallel over distances, collected in order: the bytes
+    /// do not depend on the thread count).
+    pub fn generate(&self, _key: &[u8; 32], progress: Progress<'_>) -> Result<Generated, GenerateError> {
+        let descs = self.descs();
+        let gs = self.g.values();
+        // responses[e][gi]
+        let mut responses = Vec::with_capacity(self.emitters.len());
+        for e in &self.emitters {
+            let mut per_g = Vec::with_capacity(gs.len());
+            for &g in &gs {
+                let r = zh_transport::compute_with_progress(e.transport(), &self.transport_config(g), &|| progress(1))
+                    .map_err(|m| GenerateError::Layout(format!("{} transport for g = {g}: {m}", e.prefix())))?;
+                per_g.push(r);
+            }
+            responses.push(per_g);
+        }
+        let help = "a ZH coefficient overflowed the element type; use element: F64";
+        let mut values = Vec::with_capacity(descs.len());
+        let mut discarded = 0u64;
+        for (ei, per_g) in responses.iter().enumerate() {
+            let direct: Vec<f64> = per_g.iter().flat_map(|r| r.direct.iter().copied()).collect();
+            let mut zh = Vec::new();
+            let mut sum = Vec::new();
+            for r in per_g {
+                for rows in &r.bounces {
+                    for row in rows {
+                        zh.extend_from_slice(row);
+                    }
+                }
+                for i in 0..r.distances.len() {
+                    for l in 0..self.zh_order as usize {
+                        sum.push(r.bounces.iter().map(|rows| rows[i][l]).sum::<f64>());
+                    }
+                }
+            }
+            for v in [&mut zh, &mut sum] {
+                for x in v.iter_mut().filter(|x| !x.is_finite()) {
+                    *x = 0.0;
+                    discarded += 1;
+                }
+            }
+            values.push(to_element(&descs[3 * ei], direct, help)?);
+            values.push(to_element(&descs[3 * ei + 1], zh, help)?);
+            values.push(to_element(&descs[3 * ei + 2], sum, help)?);
+        }
+        let stats = GenStats { nonfinite_discarded: discarded, samples: 0, errors: Vec::new() };
+        Ok(Generated { arrays: descs, values, stats })
+    }
+}
+
+/// Photons per walk run in the sidecar error estimate.
+pub const SIDECAR_WALK_PHOTONS: u64 = 1 << 17;
+/// Photons per walk run in the report's reference (computed once per configuration and cached).
+pub const REPORT_WALK_PHOTONS: u64 = 1 << 20;
+/// Albedo at which the walk runs; order `k` is rescaled by `α^{−k}` (exact: with `σ_t` fixed each
+/// scattering event multiplies the photon weight by `α`), so photons die quickly and the estimate is
+/// cheap, at the price of a larger variance at high orders.
+pub const WALK_ALBEDO: f64 = 0.7;
+
+/// The walk's conservative (α = 1) estimate of orders `1..=k_max` for a unit emitter in the canonical
+/// medium, on a receiver facing the light: (direct, per-order means, per-order standard errors).
+pub fn walk_reference(
+    profile: EmitterProfile,
+    g: f64,
+    d: f64,
+    k_max: usize,
+    photons: u64,
+    seed: u64,
+) -> Result<(f64, Vec<f64>, Vec<f64>), String> {
+    let alpha = WALK_ALBEDO;
+    let emitter = match profile {
+        EmitterProfile::Point => walk::Emitter::Point { intensity: 1.0, position: [0.0, 0.0, d] },
+        EmitterProfile::Directional => {
+            walk::Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
+        }
+    };
+    let medium = walk::Medium { sigma_s: alpha, sigma_a: 1.0 - alpha, g };
+    let r = walk::irradiance(&emitter, &medium, [0.0, 0.0, 1.0], &walk::WalkConfig::new(photons, k_max, seed))?;
+    let scale = |k: usize| alpha.powi(-(k as i32));
+    let means = r.orders.iter().enumerate().map(|(i, o)| o.mean * scale(i + 1)).collect();
+    let errs = r.orders.iter().enumerate().map(|(i, o)| o.std_error * scale(i + 1)).collect();
+    Ok((r.direct, means, errs))
+}
+
+/// Distances (mean free paths) at which the report compares against the walk (the issue's range).
+pub const REPORT_DISTANCES: [f64; 6] = [0.1, 0.5, 1.0, 2.0, 4.0, 8.0];
+
+/// Cached report references keyed by (profile, g bits, d bits, bounces).
+type RefCache = Mutex<HashMap<(EmitterProfile, u64, u64, usize), (f64, Vec<f64>, Vec<f64>)>>;
+
+fn cached_reference(
+    profile: EmitterProfile,
+    g: f64,
+    d: f64,
+    k_max: usize,
+) -> Result<(f64, Vec<f64>, Vec<f64>), String> {
+    static CACHE: OnceLock<RefCache> = OnceLock::new();
+    let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
+    let key = (profile, g.to_bits(), d.to_bits(), k_max);
+    if let Some(v) = cache.lock().map_err(|_| "reference cache poisoned".to_string())?.get(&key) {
+        return Ok(v.clone());
+    }
+    let v = walk_reference(profile, g, d, k_max, REPORT_WALK_PHOTONS, 0x5eed_2019)?;
+    cache.lock().map_err(|_| "reference cache poisoned".to_string())?.insert(key, v.clone());
+    Ok(v)
+}
+
+/// Relative errors of one table configuration against walk results: (single, total of orders ≤ B).
+fn compare(
+    table: &ZhResponseTable,
+    profile: EmitterProfile,
+    g: f64,
+    d: f64,
+    reference: &(f64, Vec<f64>, Vec<f64>),
+) -> Result<(f64, f64), String> {
+    let medium = Medium { sigma_s: 1.0, sigma_a: 0.0, g };
+    let opts = QueryOptions { backscatter: false, tail: false, similarity: false, max_bounce: None };
+    let emitter = match profile {
+        EmitterProfile::Point => Emitter::Point { intensity: 1.0, position: [0.0, 0.0, d] },
+        EmitterProfile::Directional => {
+            Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
+        }
+    };
+    let receiver = Receiver { position: [0.0; 3], normal: [0.0, 0.0, 1.0] };
+    let got = table.irradiance(&medium, &emitter, &receiver, &opts).map_err(|e| e.to_string())?;
+    let (direct, means, _) = reference;
+    let single_ref = means[0];
+    let total_ref = direct + means.iter().sum::<f64>();
+    let rel = |a: f64, b: f64| if b > 0.0 { (a - b).abs() / b } else { a.abs() };
+    Ok((rel(got.single, single_ref), rel(got.direct + got.single + got.multiple, total_ref)))
+}
+
+impl ZhResponse {
+    /// The g slices used for error estimates: first, middle and last (all when ≤ 3).
+    fn probe_gs(&self) -> Vec<f64> {
+        let gs = self.g.values();
+        let n = gs.len();
+        if n <= 3 { gs } else { vec![gs[0], gs[n / 2], gs[n - 1]] }
+    }
+
+    /// Error estimates against the walk (sidecar): single scattering and the sum of orders `≤ B` on a
+    /// facing receiver at d ∈ {0.5, 2} mean free paths, per emitter, for up to three g slices.
+    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
+        let table = ZhResponseTable::from_arrays(self, &generated.arrays, &generated.values)?;
+        let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
+        let (mut single, mut total, mut noise) = (0.0f64, 0.0f64, 0.0f64);
+        let mut photons = 0u64;
+        for &profile in &self.emitters {
+            for g in self.probe_gs() {
+                for d in [0.5, 2.0] {
+                    let reference = walk_reference(profile, g, d, self.bounces as usize, SIDECAR_WALK_PHOTONS, seed)?;
+                    photons += SIDECAR_WALK_PHOTONS;
+                    let (s, t) = compare(&table, profile, g, d, &reference)?;
+                    single = single.max(s);
+                    total = total.max(t);
+                    noise = noise.max(reference.2[0] / reference.1[0]);
+                }
+            }
+        }
+        let how = format!(
+            "facing receiver, d in {{0.5, 2}} mfp, emitters {:?}, g {:?}, vs reference::walk ({SIDECAR_WALK_PHOTONS} photons per case)",
+            self.emitters,
+            self.probe_gs()
+        );
+        Ok(GenStats {
+            nonfinite_discarded: generated.stats.nonfinite_discarded,
+            samples: photons,
+            errors: vec![
+                ErrorEstimate { name: "single_max_rel_vs_walk".into(), value: single, how: how.clone() },
+                ErrorEstimate { name: "orders_le_b_max_rel_vs_walk".into(), value: total, how: how.clone() },
+                ErrorEstimate {
+                    name: "walk_single_rel_std_error".into(),
+                    value: noise,
+                    how: "largest relative standard error of the walk's single-scattering estimate (noise floor)"
+                        .into(),
+                },
+            ],
+        })
+    }
+
+    /// Quality budgets for `voltab report`: distance resolution and quadrature size together, from 1/16
+    /// of the table's own settings up to them (at least 4 distances and 2 nodes per panel).
+    pub fn report_ladder(&self) -> Vec<(String, ZhResponse)> {
+        let (n, q) = (self.distance_bins, self.quadrature_nodes);
+        [(n / 16, q / 4), (n / 8, q / 3), (n / 4, q / 2), (n / 2, 2 * q / 3), (n, q)]
+            .into_iter()
+            .map(|(bins, nodes)| (bins.max(4), nodes.max(2)))
+            .map(|(bins, nodes)| {
+                (
+                    format!("distance_bins={bins},nodes={nodes}"),
+                    ZhResponse { distance_bins: bins, quadrature_nodes: nodes, ..self.clone() },
+                )
+            })
+            .collect()
+    }
+
+    /// Per emitter: the worst relative error of single scattering and of the orders `≤ B` against the
+    /// walk ([`REPORT_WALK_PHOTONS`] photons), over the probe g slices and [`REPORT_DISTANCES`].
+    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, String> {
+        let table = ZhResponseTable::from_arrays(self, &generated.arrays, &generated.values)?;
+        let mut curves = Vec::new();
+        for &profile in &self.emitters {
+            let (mut single, mut total) = (0.0f64, 0.0f64);
+            for g in self.probe_gs() {
+                for d in REPORT_DISTANCES {
+                    let reference = cached_reference(profile, g, d, self.bounces as usize)?;
+                    let (s, t) = compare(&table, profile, g, d, &reference)?;
+                    single = single.max(s);
+                    total = total.max(t);
+                }
+            }
+            curves.push((format!("{} single", profile.prefix()), single));
+            curves.push((format!("{} orders <= B", profile.prefix()), total));
+        }
+        Ok(curves)
+    }
+}
+
+/// Rows of the stability matrix for `ZhResponse`: a small table at the extreme g = ±0.95 queried in
+/// extreme media (albedo exactly 1, σ_a ≫ σ_s, σ_s → 0, very thick), at extreme distances (next to the
+/// light, beyond the table, astronomically far) and on facing, grazing and back-facing receivers, with and
+/// without similarity and back-scatter shift: every part finite and non-negative; vacuum leaves exactly
+/// the analytic direct term.
+pub fn stability_rows() -> Vec<crate::stability::Row> {
+    use crate::stability::{Expect, Row};
+    let row = |formula, input: String, value, expect| Row { kind: "ZhResponse", formula, input, value, expect };
+    let def = ZhResponse {
+        g: GValues::List(vec![-0.95, 0.0, 0.95]),
+        bounces: 4,
+        distance_bins: 16,
+        quadrature_nodes: 3,
+        element: Element::F64,
+        ..ZhResponse::default()
+    };
+    let table = match def
+        .generate(&[0; 32], &|_| {})
+        .map_err(|e| e.to_string())
+        .and_then(|g| ZhResponseTable::from_arrays(&def, &g.arrays, &g.values))
+    {
+        Ok(t) => t,
+        Err(e) => return vec![row("generate", format!("g = ±0.95 table: {e}"), f64::NAN, Expect::Finite)],
+    };
+    let media = [
+        ("albedo 1", 1.0, 0.0),
+        ("sigma_a >> sigma_s", 1e-3, 1e3),
+        ("sigma_s -> 0", 1e-300, 1.0),
+        ("very thick", 1e6, 0.0),
+    ];
+    let mut v = Vec::new();
+    for profile in EmitterProfile::ALL {
+        for (name, sigma_s, sigma_a) in media {
+            for g in [-0.95, 0.95 - 1e-12] {
+                for d in [1e-150, 1e-9, 1.0, 1e3, 1e300] {
+                    for cos_n in [1.0f64, 0.0, -1.0] {
+                        let emitter = match profile {
+                            EmitterProfile::Point => Emitter::Point { intensity: 1.0, position: [0.0, 0.0, d] },
+                            EmitterProfile::Directional => {
+                                Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
+                            }
+                        };
+                        let s = (1.0 - cos_n * cos_n).sqrt();
+                        let receiver = Receiver { position: [0.0; 3], normal: [s, 0.0, cos_n] };
+                        let opts = if cos_n == 0.0 {
+                            QueryOptions { similarity: true, backscatter: true, ..QueryOptions::default() }
+                        } else {
+                            QueryOptions::default()
+                        };
+                        let medium = Medium { sigma_s, sigma_a, g };
+                        let value = match table.irradiance(&medium, &emitter, &receiver, &opts) {
+                            Ok(x) if [x.direct, x.single, x.multiple, x.tail].iter().all(|p| *p >= 0.0) => x.total,
+                            _ => f64::NAN,
+                        };
+                        v.push(row(
+                            "irradiance total",
+                            format!("{}, {name}, g={g}, d={d:e}, cos_n={cos_n}", profile.prefix()),
+                            value,
+                            Expect::InRange(0.0, f64::MAX),
+                        ));
+                    }
+                }
+            }
+        }
+        // Closer than 1e-154 to a point light the direct term overflows f64 (and at 1e-300 the distance itself
+        // squares to 0): an explicit error, never Inf.
+        if profile == EmitterProfile::Point {
+            let emitter = Emitter::Point { intensity: 1.0, position: [0.0, 0.0, 1e-300] };
+            let receiver = Receiver { position: [0.0; 3], normal: [0.0, 0.0, 1.0] };
+            let medium = Medium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 };
+            let value = match table.irradiance(&medium, &emitter, &receiver, &QueryOptions::default()) {
+                Err(QueryError::Invalid(m)) if m.contains("overflowed") || m.contains("at the point light") => 1.0,
+                _ => f64::NAN,
+            };
+            v.push(row("overflow is an error", "point, d=1e-300".into(), value, Expect::Close { to: 1.0, rel: 0.0 }));
+        }
+        // Vacuum: exactly the analytic direct term.
+        let (d, cos_n) = (0.7f64, 0.6f64);
+        let emitter = match profile {
+            EmitterProfile::Point => Emitter::Point { intensity: 1.0, position: [0.0, 0.0, d] },
+            EmitterProfile::Directional => {
+                Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
+            }
+        };
+        let want = match profile {
+            EmitterProfile::Point => (-0.5 * d).exp() * cos_n / (d * d),
+            EmitterProfile::Directional => (-0.5 * d).exp() * cos_n,
+        };
+        let receiver = Receiver { position: [0.0; 3], normal: [0.8, 0.0, cos_n] };
+        let medium = Medium { sigma_s: 0.0, sigma_a: 0.5, g: 0.0 };
+        let value =
+            table.irradiance(&medium, &emitter, &receiver, &QueryOptions::default()).map_or(f64::NAN, |x| x.total);
+        v.push(row(
+            "vacuum = direct",
+            format!("{}, sigma_s=0", profile.prefix()),
+            value,
+            Expect::Close { to: want, rel: 1e-14 },
+        ));
+    }
+    v
+}
