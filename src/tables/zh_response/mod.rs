@@ -496,6 +496,8 @@ impl ZhResponse {
         [(n / 16, q / 4), (n / 8, q / 3), (n / 4, q / 2), (n / 2, 2 * q / 3), (n, q)]
             .into_iter()
             .map(|(bins, nodes)| (bins.max(4), nodes.max(2)))
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
             .map(|(bins, nodes)| {
                 (
                     format!("distance_bins={bins},nodes={nodes}"),
