@@ -80,6 +80,7 @@
 
 mod quad;
 pub mod query;
+pub mod tail;
 #[cfg(test)]
 mod tests;
 
