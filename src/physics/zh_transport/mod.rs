@@ -78,6 +78,7 @@
 //! band-limited ZH lobe can ring slightly negative on normals facing away; [`Response::irradiance`]
 //! clamps each part at 0.
 
+pub mod area;
 mod quad;
 pub mod query;
 pub mod tail;

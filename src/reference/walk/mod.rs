@@ -1,5 +1,5 @@
-//! Brute-force photon random-walk reference: the irradiance a receiver gets from a point or a
-//! directional emitter in a homogeneous medium, split by the number of scattering events.
+//! Brute-force photon random-walk reference: the irradiance a receiver gets from a point, a
+//! differential-area or a directional emitter in a homogeneous medium, split by the number of scattering events.
 //!
 //! **Input → output.** An [`Emitter`], a homogeneous [`Medium`] (σ_s, σ_a in 1/length,
 //! Henyey–Greenstein `g`), the unit normal `n` of a receiver at the origin `x = 0` and a
@@ -12,12 +12,14 @@
 //! **Emitters.** *Point*: isotropic intensity `I` (W/sr) at `s = d·l` in an infinite medium; direct
 //! part `I e^{−σ_t d} max(0, n·l)/d²`. *Directional*: the medium fills `{p : p·l ≤ D}`, vacuum above;
 //! light travels along `−l` (normal incidence) with irradiance `E₀` at the boundary; direct part
-//! `E₀ e^{−σ_t D} max(0, n·l)`.
+//! `E₀ e^{−σ_t D} max(0, n·l)`. *Area*: a differential patch at `s = d·l` with unit normal `n_e` and
+//! radiant intensity `I max(0, n_e·u)` in direction `u` (total power `πI`), infinite medium; direct part
+//! `I max(0, −n_e·l) e^{−σ_t d} max(0, n·l)/d²`.
 //!
 //! **Walk.** Lengths are measured in mean free paths (`σ_t = 1` internally); a photon's position is
 //! kept relative to the source (point) or as its depth below the boundary (half-space: lateral
 //! coordinates do not matter), so it stays exact however far the receiver is. A photon leaves the
-//! emitter (point: isotropic from `s`; directional: from the entry point `D·l` along `−l`) and flies
+//! emitter (point and area: isotropic from `s`; directional: from the entry point `D·l` along `−l`) and flies
 //! `Exp(1)` free paths, except that the first flight is drawn from the defensive mixture
 //! `½ Exp(1) + ½ Exp(β)`, `β = 1/(1 + min(d, R_c))` (`D` for the half-space), with the weight
 //! `e^{−t}/(½e^{−t} + ½βe^{−βt}) ≤ 2`: unbiased importance sampling that sends more photons past a
@@ -36,6 +38,17 @@
 //!   exactly, no ball or cut-off is needed, and nothing is biased. The kernel is at most
 //!   `p_max ln((a+d)/|a−d|)/(2ad)`, singular only logarithmically at `a = d`, and the vertex density
 //!   in `a` is bounded there, so the second moment is finite (a plain point detector's diverges).
+//! * *Area.* The cosine emission breaks the rotation symmetry about `s`, so the photons are emitted
+//!   *isotropically* (the point walk, same law) and the emission profile enters as a weight: the area
+//!   emitter's expectation is `πI σ_t² E_iso[4 max(0, n_e·u₀) K(y, u)]` (`u₀` the emission direction;
+//!   `E_iso[4 max(0, n_e·u₀)] = 1`). The isotropic walk's law *is* invariant under every rotation `R`
+//!   about `s` when `u₀` is rotated along with the vertex, so the point kernel's averaging applies to
+//!   the whole path: with the rotated vertex `y'` sampled as above, `R` is completed by mapping a fixed
+//!   unit vector `p̂ ⊥ (y − s)` to a uniformly spun `p̂' ⊥ (y' − s)` (Haar measure conditioned on the
+//!   image of `(y − s)/a`), and the score is `p(Ru·(−ω)) max(0, n·ω) e^{−r}/r² · 4 max(0, n_e·Ru₀)`
+//!   with the same importance weight. Unbiased for the same reason as the point kernel; the extra
+//!   factor is at most 4, so the second moment stays finite. The variance grows where little of the
+//!   rotated emission faces `n_e` (e.g. patches facing away), never the bias.
 //! * *Directional.* Medium and beam are invariant under translations parallel to the boundary, so
 //!   the irradiance at `x` from the uniform beam equals `E₀ ∫ dA(x')` of the irradiance from one
 //!   unit-power pencil entering at `D·l`, over receivers `x'` on the plane `P₀ = {p·l = 0}`. Every
@@ -48,7 +61,7 @@
 //! **Termination and its bias.** Roulette is unbiased. A photon is removed (its weight added to
 //! [`WalkResult::truncated_weight`]) when a collision lies farther than `R_c = far_mfp` free paths
 //! from the emitter (point `s`; boundary plane) *and* from every receiver point of the averaged
-//! kernel (the sphere `|y − s| = d`; the plane `P₀`). A removed photon's contributions to orders
+//! kernel (the sphere `|y − s| = d`, point and area; the plane `P₀`). A removed photon's contributions to orders
 //! `k ≤ K` need at most `K` further exponential lengths (flights and the attenuated connection) to
 //! span `R_c`; the attenuation those paths carry, relative to unremoved ones, is at most
 //! [`WalkResult::order_truncation_bound`] `= P[Poisson(R_c) ≤ K]` (`< 2e-15` for the default
@@ -94,6 +107,16 @@ pub enum Emitter {
         intensity: f64,
         /// Source position `s` relative to the receiver, `|s|` in `[1e-100, 1e100]`.
         position: [f64; 3],
+    },
+    /// Differential area (cosine-weighted) emitter in an infinite medium: radiant intensity
+    /// `intensity · max(0, normal·ω)` in direction `ω` (total power `π · intensity`).
+    Area {
+        /// Radiant intensity along the patch normal (W/sr), in `[0, 1e100]`.
+        intensity: f64,
+        /// Patch position `s` relative to the receiver, `|s|` in `[1e-100, 1e100]`.
+        position: [f64; 3],
+        /// Patch normal `n_e` (any finite non-zero vector; normalised).
+        normal: [f64; 3],
     },
     /// Collimated light entering the half-space medium `{p : p·l ≤ depth}` at normal incidence.
     Directional {
@@ -201,6 +224,15 @@ pub fn irradiance(
                 direct,
                 4.0 * std::f64::consts::PI * intensity * sigma_t * sigma_t,
             )
+        }
+        Emitter::Area { intensity, position, normal } => {
+            let intensity = in_range("emitter.intensity", intensity, 0.0, 1e100)?;
+            let dist = norm3("emitter.position", position, 1e-100, 1e100)?;
+            let ne = unit("emitter.normal", normal, 1e-150, 1e150)?;
+            let l = position.map(|c| c / dist);
+            let facing = (-dot(ne, l)).max(0.0);
+            let direct = intensity * facing * (-sigma_t * dist).exp() * dot(n, l).max(0.0) / (dist * dist);
+            (Geometry::Area { d: sigma_t * dist, l, ne }, direct, std::f64::consts::PI * intensity * sigma_t * sigma_t)
         }
         Emitter::Directional { irradiance, toward_light, depth } => {
             let e0 = in_range("emitter.irradiance", irradiance, 0.0, 1e100)?;

@@ -30,6 +30,8 @@ const MAX_COLLISIONS: usize = 1 << 32;
 pub(super) enum Geometry {
     /// Point source at `d·l`.
     Point { d: f64, l: V3 },
+    /// Cosine-weighted differential area at `d·l` with unit normal `ne`.
+    Area { d: f64, l: V3, ne: V3 },
     /// Half-space `{p·l ≤ depth}` lit along `−l`.
     Slab { depth: f64, l: V3 },
 }
@@ -57,7 +59,7 @@ impl Problem {
     /// Bundles validated parameters (lengths in mean free paths).
     pub(super) fn new(geometry: Geometry, albedo: f64, g: f64, normal: V3, k_max: usize, far: f64) -> Self {
         let (l, span) = match geometry {
-            Geometry::Point { l, d } => (l, d),
+            Geometry::Point { l, d } | Geometry::Area { l, d, .. } => (l, d),
             Geometry::Slab { l, depth } => (l, depth),
         };
         let beta = 1.0 / (1.0 + span.min(far));
@@ -116,7 +118,7 @@ impl Draws {
 pub(super) fn trace(p: &Problem, key: StreamKey, tally: &mut Tally) {
     let mut rng = Draws { key, counter: 0 };
     let (mut place, mut dir) = match p.geometry {
-        Geometry::Point { .. } => {
+        Geometry::Point { .. } | Geometry::Area { .. } => {
             let mu = 1.0 - 2.0 * rng.next();
             (Place::FromSource([0.0; 3]), direction(mu, TAU * rng.next(), basis(p.l), p.l))
         }
@@ -128,6 +130,8 @@ pub(super) fn trace(p: &Problem, key: StreamKey, tally: &mut Tally) {
     let t0 = if rng.next() < 0.5 { rng.exp1() } else { rng.exp1() / beta };
     let mut weight = 1.0 / (0.5 + 0.5 * beta * ((1.0 - beta) * t0).exp());
     let mut flight = t0;
+    // Emission direction, read by the area kernel (the walk itself emits isotropically).
+    let emitted = dir;
     for order in 1..=MAX_COLLISIONS {
         place = match place {
             Place::FromSource(r) => Place::FromSource(add(r, scale(dir, flight))),
@@ -144,7 +148,10 @@ pub(super) fn trace(p: &Problem, key: StreamKey, tally: &mut Tally) {
                     tally.truncated += weight;
                     return;
                 }
-                point_kernel(p, r, dir, &mut rng)
+                match p.geometry {
+                    Geometry::Area { ne, .. } => area_kernel(p, r, dir, emitted, ne, &mut rng),
+                    _ => point_kernel(p, r, dir, &mut rng),
+                }
             }
             Place::Depth(z) => {
                 if !z.is_finite() {
@@ -181,17 +188,26 @@ pub(super) fn trace(p: &Problem, key: StreamKey, tally: &mut Tally) {
     tally.truncated += weight;
 }
 
-/// Rotation-averaged point-detector kernel of a vertex at `rel` from the source reached along `dir`,
-/// for a source at `d·l` and the receiver at the origin: one importance sample of the Haar average
-/// of `p(u'·(−ω)) max(0, n·ω) e^{−r}/r²` over rotations about the source (module doc).
-fn point_kernel(p: &Problem, rel: V3, dir: V3, rng: &mut Draws) -> f64 {
-    let (x1, x2, x3) = (rng.next(), rng.next(), rng.next());
+/// A vertex rotated about the source (one importance sample of the Haar rotation, module doc).
+struct Rotated {
+    /// Distance from the rotated vertex to the receiver.
+    r: f64,
+    /// Importance weight `ln((a+d)/|a−d|)/(2ad)` of the sampled rotation.
+    weight: f64,
+    /// Unit direction from the receiver toward the rotated vertex.
+    omega: V3,
+    /// `n·ω` (> 0).
+    cos_n: f64,
+    /// Image of the radial direction `(y − s)/a`.
+    radial: V3,
+    /// Orthonormal pair perpendicular to `radial` (the spin frame).
+    spin: (V3, V3),
+}
+
+/// Samples the rotated vertex for a vertex at distance `a > 0` from the source with uniforms `x1, x2`;
+/// `None` when it cannot score (receiver behind the normal, or degenerate).
+fn rotate_vertex(p: &Problem, a: f64, x1: f64, x2: f64) -> Option<Rotated> {
     let (l, d) = (p.l, p.span);
-    let a = norm(rel);
-    if a.is_nan() || a <= 0.0 {
-        return 0.0;
-    }
-    let u_radial = (dot(dir, rel) / a).clamp(-1.0, 1.0);
     let (small, big) = if a < d { (a, d) } else { (d, a) };
     let gap = (a - d).abs().max(big * TINY_GAP);
     // r is log-uniform on [gap, gap + 2·small]; the weight is ln((a+d)/|a−d|)/(2ad) = (L/z)/(gap·big).
@@ -214,19 +230,64 @@ fn point_kernel(p: &Problem, rel: V3, dir: V3, rng: &mut Draws) -> f64 {
     let y = add(scale(l, (d - a) + a * one_minus_cos), scale(e_phi, a * sin_t));
     let ry = norm(y);
     if ry.is_nan() || ry <= 0.0 {
-        return 0.0;
+        return None;
     }
     let omega = scale(y, 1.0 / ry);
     let cos_n = dot(p.normal, omega);
     if cos_n.is_nan() || cos_n <= 0.0 {
-        return 0.0;
+        return None;
     }
-    // Rotated incoming direction: same radial component, uniform spin about the new radial axis.
     let radial = add(scale(l, -cos_t), scale(e_phi, sin_t));
     let polar = add(scale(l, sin_t), scale(e_phi, cos_t));
-    let spin = (polar, e_perp);
-    let u = direction(u_radial, TAU * x3, spin, radial);
-    hg_phase(p.g, -dot(u, omega)) * cos_n * (-r).exp() * weight
+    Some(Rotated { r, weight, omega, cos_n, radial, spin: (polar, e_perp) })
+}
+
+/// Rotation-averaged point-detector kernel of a vertex at `rel` from the source reached along `dir`,
+/// for a source at `d·l` and the receiver at the origin: one importance sample of the Haar average
+/// of `p(u'·(−ω)) max(0, n·ω) e^{−r}/r²` over rotations about the source (module doc).
+fn point_kernel(p: &Problem, rel: V3, dir: V3, rng: &mut Draws) -> f64 {
+    let (x1, x2, x3) = (rng.next(), rng.next(), rng.next());
+    let a = norm(rel);
+    if a.is_nan() || a <= 0.0 {
+        return 0.0;
+    }
+    let u_radial = (dot(dir, rel) / a).clamp(-1.0, 1.0);
+    let Some(v) = rotate_vertex(p, a, x1, x2) else {
+        return 0.0;
+    };
+    // Rotated incoming direction: same radial component, uniform spin about the new radial axis.
+    let u = direction(u_radial, TAU * x3, v.spin, v.radial);
+    hg_phase(p.g, -dot(u, v.omega)) * v.cos_n * (-v.r).exp() * v.weight
+}
+
+/// Rotation-averaged kernel of the area emitter (module doc): the photon was emitted isotropically
+/// along `emitted`; the rotation `R` maps `(y − s)/a` to the sampled radial direction and a fixed
+/// perpendicular `p̂` to a uniformly spun one, and the score of the rotated path is the point kernel
+/// times the emission reweighting `4 max(0, n_e·R u₀)` (mean 1 over isotropic `u₀`, at most 4).
+fn area_kernel(p: &Problem, rel: V3, dir: V3, emitted: V3, ne: V3, rng: &mut Draws) -> f64 {
+    let (x1, x2, x3) = (rng.next(), rng.next(), rng.next());
+    let a = norm(rel);
+    if a.is_nan() || a <= 0.0 {
+        return 0.0;
+    }
+    let Some(v) = rotate_vertex(p, a, x1, x2) else {
+        return 0.0;
+    };
+    let r_hat = scale(rel, 1.0 / a);
+    let (p_hat, q_hat) = basis(r_hat);
+    let (s3, c3) = (TAU * x3).sin_cos();
+    let (f1, f2) = v.spin;
+    let p_img = add(scale(f1, c3), scale(f2, s3));
+    let q_img = cross(v.radial, p_img);
+    // (r̂, p̂, q̂ = r̂ × p̂) and (radial, p̂', q̂' = radial × p̂') are both right-handed: R ∈ SO(3).
+    let rotate =
+        |w: V3| add(scale(v.radial, dot(w, r_hat)), add(scale(p_img, dot(w, p_hat)), scale(q_img, dot(w, q_hat))));
+    let emission = 4.0 * dot(ne, rotate(emitted)).max(0.0);
+    if emission == 0.0 {
+        return 0.0;
+    }
+    let u = rotate(dir);
+    hg_phase(p.g, -dot(u, v.omega)) * v.cos_n * (-v.r).exp() * v.weight * emission
 }
 
 /// Plane-integrated detector kernel of a vertex at height `h` above the receiver plane reached along
@@ -297,6 +358,10 @@ fn basis(u: V3) -> (V3, V3) {
     let e1 = scale(e1, 1.0 / norm(e1));
     let e2 = [u[1] * e1[2] - u[2] * e1[1], u[2] * e1[0] - u[0] * e1[2], u[0] * e1[1] - u[1] * e1[0]];
     (e1, e2)
+}
+
+fn cross(a: V3, b: V3) -> V3 {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 fn dot(a: V3, b: V3) -> f64 {

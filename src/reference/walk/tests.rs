@@ -112,6 +112,29 @@ fn point_single(sigma_s: f64, sigma_t: f64, g: f64, intensity: f64, d: f64, cos_
     sigma_s * intensity / d * integrate(&outer, 0.0, PI, 1e-8)
 }
 
+/// Order-1 irradiance from an area emitter at distance `d` whose normal is `−l` (`facing = true`, it
+/// faces the receiver) or `+l`: the point-source quadrature with the emission factor. Along the ray the
+/// direction from the source to the scattering point is `v` with `l·v = sin(α − ψ)`, so the factor is
+/// `max(0, ∓sin(α − ψ))` and the `α` range is split at `α = ψ` where it vanishes.
+fn area_single(sigma_s: f64, sigma_t: f64, g: f64, intensity: f64, d: f64, cos_nl: f64, facing: bool) -> f64 {
+    let sin_nl = (1.0 - cos_nl * cos_nl).max(0.0).sqrt();
+    let outer = |psi: f64| {
+        let c = azimuthal(cos_nl * psi.cos(), sin_nl * psi.sin());
+        if c == 0.0 {
+            return 0.0;
+        }
+        let (t0, b) = (d * psi.cos(), d * psi.sin());
+        let inner = |alpha: f64| {
+            let emission = if facing { (psi - alpha).sin() } else { (alpha - psi).sin() };
+            phase(g, -alpha.sin()) * (-sigma_t * (t0 + b * (FRAC_PI_4 + 0.5 * alpha).tan())).exp() * emission.max(0.0)
+        };
+        let lo = -t0.atan2(b);
+        let (a, z) = if facing { (lo, psi.min(FRAC_PI_2)) } else { (psi.max(lo), FRAC_PI_2) };
+        c * integrate(&inner, a, z, 1e-9)
+    };
+    sigma_s * intensity / d * integrate(&outer, 0.0, PI, 1e-8)
+}
+
 /// Order-1 irradiance at depth `depth` below the boundary of a half-space lit along `−l`.
 fn directional_single(sigma_s: f64, sigma_t: f64, g: f64, e0: f64, depth: f64, cos_nl: f64) -> f64 {
     let sin_nl = (1.0 - cos_nl * cos_nl).max(0.0).sqrt();
@@ -210,6 +233,95 @@ fn point_single_scattering_backward_hg_far_matches_quadrature() {
     point_single_scattering(-0.5, &[4.0]);
 }
 
+/// Single scattering from an area emitter facing the receiver (`n_e = −l`) and facing away (`n_e = l`),
+/// σ_t = 2/length, albedo 1/4, against quadrature for distances `d_mfp` and the three normals.
+fn area_single_scattering(g: f64, distances: &[f64]) {
+    let medium = Medium { sigma_s: 0.5, sigma_a: 1.5, g };
+    for &d_mfp in distances {
+        let d = d_mfp / 2.0;
+        for facing in [true, false] {
+            let normal = if facing { L.map(|c| -c) } else { L };
+            let emitter = Emitter::Area { intensity: 3.0, position: L.map(|c| c * d), normal };
+            for (n, cos_nl) in normals() {
+                let exact = area_single(0.5, 2.0, g, 3.0, d, cos_nl, facing);
+                let label = format!("area g={g} d={d_mfp} mfp facing={facing} n·l={cos_nl}");
+                if exact == 0.0 {
+                    // Facing away from each other: no once-scattered light can reach the receiver's
+                    // hemisphere, and the rotated vertices never score either.
+                    let r = irradiance(&emitter, &medium, n, &WalkConfig::new(20_000, 1, 21)).unwrap();
+                    assert_eq!(r.orders[0].mean, 0.0, "{label}");
+                    continue;
+                }
+                check(&label, order_one(&emitter, &medium, n, 21), exact);
+            }
+        }
+    }
+}
+
+#[test]
+fn area_single_scattering_isotropic_matches_quadrature() {
+    area_single_scattering(0.0, &[0.1, 1.0, 4.0]);
+}
+
+#[test]
+fn area_single_scattering_forward_hg_matches_quadrature() {
+    area_single_scattering(0.5, &[0.1, 1.0, 4.0]);
+}
+
+#[test]
+fn area_single_scattering_backward_hg_matches_quadrature() {
+    area_single_scattering(-0.5, &[0.1, 1.0, 4.0]);
+}
+
+/// All orders at a general patch angle, from linearity and mirror symmetry: `Area(n) − Area(−n)` is the
+/// dipole source `I n·u`, linear in `n`; with `n_θ = cos θ (−l) + sin θ p` (`p ⊥ l`) and a receiver
+/// normal perpendicular to `p`, the mirror across the plane `⊥ p` (it fixes the source, the receiver and
+/// its normal) makes the `p` dipole's response vanish, so
+/// `Area(n_θ) − Area(−n_θ) = cos θ (Area(−l) − Area(l))` order by order. The left side exercises the
+/// rotation-averaged kernel at a general angle; the right side only at `θ = 0, π` (checked above
+/// against quadrature). Also checks `Area(p) = Area(−p)` for such receivers.
+#[test]
+fn area_general_angle_obeys_dipole_linearity() {
+    let medium = Medium { sigma_s: 1.0, sigma_a: 0.25, g: 0.4 };
+    let theta = PI / 3.0;
+    let d = 0.8;
+    let n_theta: [f64; 3] = std::array::from_fn(|i| -theta.cos() * L[i] + theta.sin() * L_PERP[i]);
+    let cfg = WalkConfig::new(400_000, 3, 77);
+    // Receiver normals perpendicular to L_PERP: facing the light and halfway to L × L_PERP.
+    let side =
+        [L[1] * L_PERP[2] - L[2] * L_PERP[1], L[2] * L_PERP[0] - L[0] * L_PERP[2], L[0] * L_PERP[1] - L[1] * L_PERP[0]];
+    for normal in [L, std::array::from_fn(|i| L[i] + side[i])] {
+        let run = |ne: [f64; 3], seed: u64| {
+            let emitter = Emitter::Area { intensity: 2.0, position: L.map(|c| c * d), normal: ne };
+            irradiance(&emitter, &medium, normal, &WalkConfig { seed, ..cfg }).unwrap()
+        };
+        let (plus, minus) = (run(n_theta, 1), run(n_theta.map(|c| -c), 2));
+        let (toward, away) = (run(L.map(|c| -c), 3), run(L, 4));
+        let (p_plus, p_minus) = (run(L_PERP, 5), run(L_PERP.map(|c| -c), 6));
+        let parts = |r: &WalkResult| -> Vec<OrderEstimate> { r.orders.iter().copied().chain([r.total]).collect() };
+        for (k, (((a, b), (c, e)), (f, h))) in parts(&plus)
+            .into_iter()
+            .zip(parts(&minus))
+            .zip(parts(&toward).into_iter().zip(parts(&away)))
+            .zip(parts(&p_plus).into_iter().zip(parts(&p_minus)))
+            .enumerate()
+        {
+            let lhs = a.mean - b.mean;
+            let rhs = theta.cos() * (c.mean - e.mean);
+            let se =
+                (a.std_error.powi(2) + b.std_error.powi(2) + 0.25 * (c.std_error.powi(2) + e.std_error.powi(2))).sqrt();
+            eprintln!("dipole part {k}: {lhs:.5e} vs {rhs:.5e} ({:+.2} SE)", (lhs - rhs) / se);
+            assert!((lhs - rhs).abs() < 4.0 * se, "part {k}: {lhs} vs {rhs} ± {se}");
+            let se = (f.std_error.powi(2) + h.std_error.powi(2)).sqrt();
+            eprintln!("mirror part {k}: {:.5e} vs {:.5e} ({:+.2} SE)", f.mean, h.mean, (f.mean - h.mean) / se);
+            assert!((f.mean - h.mean).abs() < 4.0 * se && f.mean > 0.0, "mirror part {k}: {f:?} vs {h:?}");
+        }
+        // The direct part obeys the same identity exactly.
+        let lhs = plus.direct - minus.direct;
+        assert!((lhs - theta.cos() * (toward.direct - away.direct)).abs() <= 1e-15 * toward.direct);
+    }
+}
+
 /// Single scattering in the half-space (σ_t = 2/length, albedo 1/4) against quadrature, for
 /// `D ∈ {0.1, 1, 4}` free paths and the three normals.
 fn directional_single_scattering(g: f64) {
@@ -245,6 +357,7 @@ fn no_scattering_gives_exact_zeros() {
     for emitter in [
         Emitter::Point { intensity: 2.0, position: [0.0, 0.0, 1.5] },
         Emitter::Directional { irradiance: 2.0, toward_light: [0.0, 0.0, 1.0], depth: 1.5 },
+        Emitter::Area { intensity: 2.0, position: [0.0, 0.0, 1.5], normal: [0.0, 0.6, -0.8] },
     ] {
         let r = irradiance(&emitter, &medium, [0.0, 0.6, 0.8], &WalkConfig::new(1000, 4, 1)).unwrap();
         assert!(r.orders.iter().chain([&r.tail]).all(|o| o.mean == 0.0 && o.std_error == 0.0));
@@ -252,6 +365,7 @@ fn no_scattering_gives_exact_zeros() {
         let expected = match emitter {
             Emitter::Point { .. } => 2.0 * (-0.7f64 * 1.5).exp() * 0.8 / 2.25,
             Emitter::Directional { .. } => 2.0 * (-0.7f64 * 1.5).exp() * 0.8,
+            Emitter::Area { .. } => 2.0 * 0.8 * (-0.7f64 * 1.5).exp() * 0.8 / 2.25,
         };
         assert!((r.direct - expected).abs() <= 1e-15 * expected);
     }
@@ -307,6 +421,7 @@ fn results_do_not_depend_on_thread_count() {
     for emitter in [
         Emitter::Point { intensity: 1.0, position: [0.3, 0.4, 1.2] },
         Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.6, 0.8], depth: 0.7 },
+        Emitter::Area { intensity: 1.0, position: [0.3, 0.4, 1.2], normal: [1.0, 0.0, -0.5] },
     ] {
         let run = |threads| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
@@ -346,6 +461,33 @@ fn bad_parameters_are_rejected_by_name() {
             irradiance(&Emitter::Point { intensity: -1.0, position: [1.0, 0.0, 0.0] }, &medium, [0.0, 0.0, 1.0], &cfg),
         ),
         ("normal", irradiance(&point, &medium, [0.0; 3], &cfg)),
+        (
+            "emitter.normal",
+            irradiance(
+                &Emitter::Area { intensity: 1.0, position: [1.0, 0.0, 0.0], normal: [0.0, f64::NAN, 1.0] },
+                &medium,
+                [0.0, 0.0, 1.0],
+                &cfg,
+            ),
+        ),
+        (
+            "emitter.position",
+            irradiance(
+                &Emitter::Area { intensity: 1.0, position: [0.0; 3], normal: [0.0, 0.0, 1.0] },
+                &medium,
+                [0.0, 0.0, 1.0],
+                &cfg,
+            ),
+        ),
+        (
+            "emitter.intensity",
+            irradiance(
+                &Emitter::Area { intensity: f64::INFINITY, position: [1.0, 0.0, 0.0], normal: [0.0, 0.0, 1.0] },
+                &medium,
+                [0.0, 0.0, 1.0],
+                &cfg,
+            ),
+        ),
         ("normal", irradiance(&point, &medium, [f64::INFINITY, 0.0, 0.0], &cfg)),
         (
             "emitter.toward_light",
@@ -421,6 +563,9 @@ fn extreme_inputs_stay_finite() {
         Emitter::Directional { irradiance: 1e100, toward_light: [1e-150, 0.0, 0.0], depth: 0.0 },
         Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, -3.0], depth: 1e100 },
         Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: 1e-100 },
+        Emitter::Area { intensity: 1e100, position: [1e-100, 0.0, 0.0], normal: [-1.0, 0.0, 0.0] },
+        Emitter::Area { intensity: 1.0, position: [0.0, 1e100, 0.0], normal: [0.0, 1e-150, 0.0] },
+        Emitter::Area { intensity: 1.0, position: [0.0, 0.0, 0.5], normal: [1.0, 0.0, 0.0] },
     ];
     for medium in &media {
         for emitter in &emitters {
