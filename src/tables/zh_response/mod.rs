@@ -11,8 +11,9 @@
 //!   exactly `b = 1..=B` scattering events, so a consumer can pick orders and weight them by `α^b`;
 //! - `{p}_zh_sum[g, d, l]` — their sum over `b`, the single combined table of Sec. 5.1 (conservative media).
 //!
-//! With the tail closure on, `{p}_tail[g, albedo, d, l]` adds the ZH (`l = 0, 1`) of all orders `b > B`
-//! on a small albedo axis (see [`crate::physics::zh_transport::tail`]).
+//! - `{p}_tail[g, albedo, d, l]` (with `tail_closure`) — the ZH (`l = 0, 1`) of all orders `b > B`,
+//!   `Σ_{b>B} α^b c^{(b)}`, on the albedo axis [`TAIL_ALBEDOS`] (P1/diffusion closure sourced by bounce `B`,
+//!   [`crate::physics::zh_transport::tail`]), so albedo-1 media in thick regions are not silently dark.
 //!
 //! **Canonical medium and units.** `σ_s = 1`, `σ_a = 0`, lengths in mean free paths. A point emitter has
 //! intensity 1 W/sr at distance `d`; a directional emitter delivers irradiance 1 W/m² at the boundary of
@@ -43,7 +44,7 @@ pub use table::{
 use super::phase_hg::{Element, GValues};
 use super::{ErrorEstimate, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
 use crate::container::{ArrayDesc, Axis};
-use crate::physics::zh_transport::{self, EmitterKind, ResponseConfig};
+use crate::physics::zh_transport::{self, EmitterKind, ResponseConfig, tail};
 use crate::reference::walk;
 
 /// Version of the array layout below.
@@ -59,6 +60,9 @@ pub const MAX_ABS_G: f64 = 0.99;
 pub const MAX_ORDER: u32 = 32;
 /// Most bounces `B`.
 pub const MAX_BOUNCES: u32 = 64;
+
+/// Albedo nodes of the tail arrays: dense toward 1, where the tail grows fastest.
+pub const TAIL_ALBEDOS: [f64; 12] = [0.0, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995, 0.999, 1.0];
 
 /// Which canonical emitter a set of arrays is for (dubouchet2019 Fig. 4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, schemars::JsonSchema)]
@@ -126,6 +130,9 @@ crate::declare_params! {
         /// Back-scatter compensation of Sec. 5.2: scattered light is looked up for a receiver shifted
         /// this far along its normal (the direct term is not); 0 switches it off.
         backscatter_shift: f64 = 0.125, unit = "mean free paths", range = "0 (off) to 1";
+        /// Tabulate the closure of the bounce series beyond `bounces` (orders b > B as a diffusion-
+        /// transported population sourced by bounce B) on a 12-node albedo axis; queries add it.
+        tail_closure: bool = true, unit = "", range = "true | false";
         /// Stored element type.
         element: Element = Element::F32, unit = "", range = "F32 | F64";
         /// zstd compression level.
@@ -225,6 +232,11 @@ impl ZhResponse {
         issues
     }
 
+    /// Arrays per emitter profile: direct, zh, zh_sum, and tail when `tail_closure`.
+    pub fn arrays_per_emitter(&self) -> usize {
+        3 + usize::from(self.tail_closure)
+    }
+
     fn n_g(&self) -> u128 {
         match &self.g {
             GValues::List(v) => v.len() as u128,
@@ -235,7 +247,7 @@ impl ZhResponse {
     /// Peak memory: the f64 responses of one slice while computing, plus every stored value three
     /// times (f64 working copy, element copy, compressed output bounded by raw).
     pub fn estimated_bytes(&self) -> u128 {
-        let lobes = u128::from(self.bounces) + 1;
+        let lobes = u128::from(self.bounces) + 1 + if self.tail_closure { TAIL_ALBEDOS.len() as u128 } else { 0 };
         let per_g = self.emitters.len() as u128 * (lobes * u128::from(self.distance_bins) * u128::from(self.zh_order));
         self.n_g() * per_g * 24 + per_g * 8
     }
@@ -304,6 +316,21 @@ impl ZhResponse {
                 "W/(m^2 sr)",
                 vec![g_axis.clone(), d_axis.clone(), l_axis.clone()],
             ));
+            if self.tail_closure {
+                out.push(desc(
+                    format!("{p}_tail"),
+                    format!(
+                        "ZH coefficients (l = 0, 1) about the light axis of all orders b > B weighted by albedo^b ({p} emitter; P1 closure)"
+                    ),
+                    "W/(m^2 sr)",
+                    vec![
+                        g_axis.clone(),
+                        Axis::explicit("albedo", "", TAIL_ALBEDOS.to_vec()),
+                        d_axis.clone(),
+                        Axis::linear("l", "band", 0.0, 1.0, 2),
+                    ],
+                ));
+            }
         }
         out
     }
@@ -328,6 +355,7 @@ impl ZhResponse {
         let help = "a ZH coefficient overflowed the element type; use element: F64";
         let mut values = Vec::with_capacity(descs.len());
         let mut discarded = 0u64;
+        let mut tail_energy = Vec::new();
         for (ei, per_g) in responses.iter().enumerate() {
             let direct: Vec<f64> = per_g.iter().flat_map(|r| r.direct.iter().copied()).collect();
             let mut zh = Vec::new();
@@ -350,13 +378,60 @@ impl ZhResponse {
                     discarded += 1;
                 }
             }
-            values.push(to_element(&descs[3 * ei], direct, help)?);
-            values.push(to_element(&descs[3 * ei + 1], zh, help)?);
-            values.push(to_element(&descs[3 * ei + 2], sum, help)?);
+            let k = self.arrays_per_emitter();
+            values.push(to_element(&descs[k * ei], direct, help)?);
+            values.push(to_element(&descs[k * ei + 1], zh, help)?);
+            values.push(to_element(&descs[k * ei + 2], sum, help)?);
+            if self.tail_closure {
+                let mut tail = Vec::new();
+                for (r, &g) in per_g.iter().zip(&gs) {
+                    for per_albedo in tail::tail_table(r, g, &TAIL_ALBEDOS) {
+                        for c in per_albedo {
+                            tail.extend_from_slice(&c);
+                        }
+                    }
+                }
+                for x in tail.iter_mut().filter(|x| !x.is_finite()) {
+                    *x = 0.0;
+                    discarded += 1;
+                }
+                values.push(to_element(&descs[k * ei + 3], tail, help)?);
+                for (r, &g) in per_g.iter().zip(&gs) {
+                    for d in TAIL_REPORT_DISTANCES {
+                        tail_energy.push((self.emitters[ei], g, d, tail::tail_energy_ratio(r, g, 1.0, d)));
+                    }
+                }
+            }
         }
-        let stats = GenStats { nonfinite_discarded: discarded, samples: 0, errors: Vec::new() };
+        let errors = tail_energy_estimates(&tail_energy);
+        let stats = GenStats { nonfinite_discarded: discarded, samples: 0, errors };
         Ok(Generated { arrays: descs, values, stats })
     }
+}
+
+/// Distances (mean free paths) at which the sidecar reports the energy the tail adds.
+pub const TAIL_REPORT_DISTANCES: [f64; 3] = [1.0, 4.0, 8.0];
+
+/// "How much energy the tail adds" (issue 3): per emitter and distance, the largest ratio over the g
+/// slices of the tail's fluence to that of the truncated series at albedo 1.
+fn tail_energy_estimates(rows: &[(EmitterProfile, f64, f64, f64)]) -> Vec<ErrorEstimate> {
+    let mut out = Vec::new();
+    for profile in EmitterProfile::ALL {
+        for d in TAIL_REPORT_DISTANCES {
+            let worst = rows.iter().filter(|r| r.0 == profile && r.2 == d).map(|r| r.3).fold(f64::NAN, f64::max);
+            if worst.is_nan() {
+                continue;
+            }
+            out.push(ErrorEstimate {
+                name: format!("tail_energy_ratio_{}_d{d}_albedo1", profile.prefix()),
+                value: worst,
+                how: "fluence of the tail closure / fluence of orders 1..=B at albedo 1 (largest over the g slices); \
+                      the energy the closure adds, not an error"
+                    .into(),
+            });
+        }
+    }
+    out
 }
 
 /// Photons per walk run in the sidecar error estimate.
@@ -473,20 +548,17 @@ impl ZhResponse {
             self.emitters,
             self.probe_gs()
         );
-        Ok(GenStats {
-            nonfinite_discarded: generated.stats.nonfinite_discarded,
-            samples: photons,
-            errors: vec![
-                ErrorEstimate { name: "single_max_rel_vs_walk".into(), value: single, how: how.clone() },
-                ErrorEstimate { name: "orders_le_b_max_rel_vs_walk".into(), value: total, how: how.clone() },
-                ErrorEstimate {
-                    name: "walk_single_rel_std_error".into(),
-                    value: noise,
-                    how: "largest relative standard error of the walk's single-scattering estimate (noise floor)"
-                        .into(),
-                },
-            ],
-        })
+        let mut errors = vec![
+            ErrorEstimate { name: "single_max_rel_vs_walk".into(), value: single, how: how.clone() },
+            ErrorEstimate { name: "orders_le_b_max_rel_vs_walk".into(), value: total, how: how.clone() },
+            ErrorEstimate {
+                name: "walk_single_rel_std_error".into(),
+                value: noise,
+                how: "largest relative standard error of the walk's single-scattering estimate (noise floor)".into(),
+            },
+        ];
+        errors.extend(generated.stats.errors.iter().cloned());
+        Ok(GenStats { nonfinite_discarded: generated.stats.nonfinite_discarded, samples: photons, errors })
     }
 
     /// Quality budgets for `voltab report`: distance resolution and quadrature size together, from 1/16

@@ -35,20 +35,23 @@
 
 use std::path::Path;
 
-use super::{EmitterProfile, ZhResponse, ZhResponseRaw};
+use super::{EmitterProfile, TAIL_ALBEDOS, ZhResponse, ZhResponseRaw};
 use crate::container::{ArrayDesc, ArrayValues};
 use crate::physics::sh;
+use crate::physics::zh_transport::tail;
 use crate::tables::TableDef;
 
-/// Array names of a table holding `emitters`, in file order.
-pub fn array_names(emitters: &[EmitterProfile]) -> Vec<String> {
-    emitters
-        .iter()
-        .flat_map(|e| {
-            let p = e.prefix();
-            [format!("{p}_direct"), format!("{p}_zh"), format!("{p}_zh_sum")]
-        })
-        .collect()
+/// Array names of a table with definition `def`, in file order.
+pub fn array_names(def: &ZhResponse) -> Vec<String> {
+    let mut out = Vec::new();
+    for e in &def.emitters {
+        let p = e.prefix();
+        out.extend([format!("{p}_direct"), format!("{p}_zh"), format!("{p}_zh_sum")]);
+        if def.tail_closure {
+            out.push(format!("{p}_tail"));
+        }
+    }
+    out
 }
 
 /// Failure to load a `ZhResponse` table.
@@ -191,8 +194,8 @@ pub struct Radiance {
 enum Loc {
     /// Below the first node: per-bounce power law (point) or constant (directional).
     Below { ratio: f64 },
-    /// Beyond the last node: the last node times `e^{−Δd}`.
-    Above { decay: f64 },
+    /// Beyond the last node: the last node times `decay = e^{−Δd}`; `d` the distance.
+    Above { decay: f64, d: f64 },
     /// Between nodes `i` and `i + 1` at `λ` (linear in `ln d`), `d` the distance.
     Between { i: usize, lambda: f64, d: f64 },
 }
@@ -211,6 +214,10 @@ struct Slice {
     log_c0: Vec<f64>,
     /// Per bounce: power-law exponent below the first node (point tables), in `[−1, 0]`.
     k_low: Vec<f64>,
+    /// Tail closure `[albedo][d][l = 0, 1]` on [`super::TAIL_ALBEDOS`] (empty without one).
+    tail: Vec<f64>,
+    /// Diffusion decay `ν` of the tail population per albedo node (`tail::diffusion`).
+    tail_nu: Vec<f64>,
 }
 
 impl Slice {
@@ -244,7 +251,46 @@ impl Slice {
                 }
             })
             .collect();
-        Self { profile, gi, raw, shape, log_c0, k_low }
+        Self { profile, gi, raw, shape, log_c0, k_low, tail: Vec::new(), tail_nu: Vec::new() }
+    }
+
+    /// Tail `[c_0, c_1]` at albedo node `j` and located distance: `e^{ν d} c_0` geometric in `ln d` where
+    /// positive at both nodes (else linear), the ratio `c_1/c_0` linear (`ν` the node's diffusion decay:
+    /// exact for the far field `d^k e^{−ν d}`); held constant below the axis; beyond it the diffusion decay
+    /// `e^{−ν Δd}` (point: times `d_last/d`), which never adds energy.
+    fn tail_at_node(&self, j: usize, loc: Loc, ds: &[f64]) -> [f64; 2] {
+        let nd = ds.len();
+        let at = |i: usize| {
+            let k = (j * nd + i) * 2;
+            [self.tail[k], self.tail[k + 1]]
+        };
+        match loc {
+            Loc::Below { .. } => at(0),
+            Loc::Above { d, .. } => {
+                let last = at(nd - 1);
+                let nu = self.tail_nu[j];
+                let mut f = (-nu * (d - ds[nd - 1])).exp();
+                if self.profile == EmitterProfile::Point {
+                    f *= ds[nd - 1] / d;
+                }
+                if !f.is_finite() {
+                    f = 0.0;
+                }
+                [last[0] * f, last[1] * f]
+            }
+            Loc::Between { i, lambda, d } => {
+                let (a, b) = (at(i), at(i + 1));
+                if a[0] > 0.0 && b[0] > 0.0 {
+                    let nu = self.tail_nu[j];
+                    let log_c0 =
+                        (1.0 - lambda) * (a[0].ln() + nu * (ds[i] - d)) + lambda * (b[0].ln() + nu * (ds[i + 1] - d));
+                    let c0 = log_c0.exp();
+                    [c0, c0 * ((1.0 - lambda) * a[1] / a[0] + lambda * b[1] / b[0])]
+                } else {
+                    blend(a, b, lambda)
+                }
+            }
+        }
     }
 
     /// `acc += weight · Σ_{b ∈ orders} α^b c_b(d)` at the located distance, with the law of
@@ -276,7 +322,7 @@ impl Slice {
                         *a += w * c;
                     }
                 }
-                Loc::Above { decay } => {
+                Loc::Above { decay, .. } => {
                     for (a, c) in acc.iter_mut().zip(&self.raw[at(nd - 1, b)..at(nd - 1, b) + order]) {
                         *a += ab * decay * c;
                     }
@@ -433,14 +479,18 @@ impl ZhResponseTable {
             }
         };
         let names: Vec<String> = h.arrays.iter().map(|a| a.name.clone()).collect();
+        let index = |name: String| names.iter().position(|n| *n == name);
         for profile in profiles {
-            let zh_index = names
-                .iter()
-                .position(|n| *n == format!("{}_zh", profile.prefix()))
+            let zh_index = index(format!("{}_zh", profile.prefix()))
                 .ok_or_else(|| layout(format!("lacks the {}_zh array", profile.prefix())))?;
+            let tail_index = index(format!("{}_tail", profile.prefix()));
             for &gi in &gis {
                 let values = r.read_slice(zh_index, gi as u64).map_err(container)?.to_f64();
-                table.slices.push(table.make_slice(profile, gi, &values).map_err(layout)?);
+                let tail = match tail_index {
+                    Some(t) => r.read_slice(t, gi as u64).map_err(container)?.to_f64(),
+                    None => Vec::new(),
+                };
+                table.slices.push(table.make_slice(profile, gi, &values, &tail).map_err(layout)?);
             }
         }
         Ok(table)
@@ -449,7 +499,8 @@ impl ZhResponseTable {
     /// Builds a table from in-memory arrays as generated (every slice loaded), checking the layout.
     /// With `values` empty only the layout is checked and nothing is loaded.
     pub fn from_arrays(def: &ZhResponse, descs: &[ArrayDesc], values: &[ArrayValues]) -> Result<Self, String> {
-        let want = array_names(&def.emitters);
+        let want = array_names(def);
+        let k = def.arrays_per_emitter();
         let names: Vec<&str> = descs.iter().map(|d| d.name.as_str()).collect();
         if names != want {
             return Err(format!("unexpected ZhResponse arrays {names:?}; expected {want:?}"));
@@ -460,10 +511,11 @@ impl ZhResponseTable {
         let distances = def.distance_axis().values_vec();
         for (i, d) in descs.iter().enumerate() {
             let shape = d.shape();
-            let expect: Vec<u64> = match i % 3 {
+            let expect: Vec<u64> = match i % k {
                 0 => vec![g.len() as u64, distances.len() as u64],
                 1 => vec![g.len() as u64, bounces as u64, distances.len() as u64, order as u64],
-                _ => vec![g.len() as u64, distances.len() as u64, order as u64],
+                2 => vec![g.len() as u64, distances.len() as u64, order as u64],
+                _ => vec![g.len() as u64, TAIL_ALBEDOS.len() as u64, distances.len() as u64, 2],
             };
             if shape != expect {
                 return Err(format!("array {} has shape {shape:?}, expected {expect:?} from the definition", d.name));
@@ -498,25 +550,81 @@ impl ZhResponseTable {
             return Err(format!("{} arrays of values for {} descriptions", values.len(), descs.len()));
         }
         let per_g = bounces * table.distances.len() * order;
+        let per_g_tail = TAIL_ALBEDOS.len() * table.distances.len() * 2;
         for (ei, &profile) in def.emitters.iter().enumerate() {
-            let all = values[3 * ei + 1].to_f64();
+            let all = values[k * ei + 1].to_f64();
+            let tails = if def.tail_closure { values[k * ei + 3].to_f64() } else { Vec::new() };
             for gi in 0..table.g.len() {
-                let slice = table.make_slice(profile, gi, &all[gi * per_g..(gi + 1) * per_g])?;
+                let tail = if def.tail_closure { &tails[gi * per_g_tail..(gi + 1) * per_g_tail] } else { &[][..] };
+                let slice = table.make_slice(profile, gi, &all[gi * per_g..(gi + 1) * per_g], tail)?;
                 table.slices.push(slice);
             }
         }
         Ok(table)
     }
 
-    fn make_slice(&self, profile: EmitterProfile, gi: usize, values: &[f64]) -> Result<Slice, String> {
+    fn make_slice(&self, profile: EmitterProfile, gi: usize, values: &[f64], tail: &[f64]) -> Result<Slice, String> {
         let nd = self.distances.len();
         if values.len() != self.bounces * nd * self.order {
             return Err(format!("{} slice {gi} has {} values", profile.prefix(), values.len()));
         }
-        if let Some(v) = values.iter().find(|v| !v.is_finite()) {
+        if !(tail.is_empty() || tail.len() == TAIL_ALBEDOS.len() * nd * 2) {
+            return Err(format!("{} tail slice {gi} has {} values", profile.prefix(), tail.len()));
+        }
+        if let Some(v) = values.iter().chain(tail).find(|v| !v.is_finite()) {
             return Err(format!("{} slice {gi} holds the non-finite value {v}", profile.prefix()));
         }
-        Ok(Slice::new(profile, gi, values, &self.distances, self.bounces, self.order))
+        let mut slice = Slice::new(profile, gi, values, &self.distances, self.bounces, self.order);
+        slice.tail = tail.to_vec();
+        if !tail.is_empty() {
+            slice.tail_nu = TAIL_ALBEDOS.iter().map(|&a| tail::diffusion(self.g[gi], a).decay).collect();
+        }
+        Ok(slice)
+    }
+
+    /// `acc += weight · tail(α, d)` (`[c_0, c_1]`), interpolated in g and in α between [`TAIL_ALBEDOS`]
+    /// nodes (with [`blend`]); nothing when the table has no tail.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn accumulate_tail(
+        &self,
+        profile: EmitterProfile,
+        g: f64,
+        d: f64,
+        alpha: f64,
+        weight: f64,
+        acc: &mut [f64; 2],
+    ) -> Result<(), QueryError> {
+        let loc = self.locate(d);
+        let alpha = alpha.clamp(0.0, 1.0);
+        let j = TAIL_ALBEDOS.partition_point(|&a| a <= alpha).clamp(1, TAIL_ALBEDOS.len() - 1) - 1;
+        // Interpolation variable √(1 − α): the tail's far field decays like e^{−ν d} with the diffusion
+        // decay ν ≈ √(3(1 − α)(1 − g)), so ln c_0 is nearly linear in it.
+        let s = |a: f64| (1.0 - a).max(0.0).sqrt();
+        let u = (s(TAIL_ALBEDOS[j]) - s(alpha)) / (s(TAIL_ALBEDOS[j]) - s(TAIL_ALBEDOS[j + 1]));
+        for (gi, w) in self.bracket(g)? {
+            if w == 0.0 {
+                continue;
+            }
+            let slice = self.slice(profile, gi)?;
+            if slice.tail.is_empty() {
+                return Ok(());
+            }
+            // The tail starts at order B + 1: blend tail/α^{B+1} (smooth in α), then restore the power.
+            // Below the first non-zero node (α = 0 carries nothing) the scaled value is held.
+            let p = self.bounces as i32 + 1;
+            let scaled = |k: usize| {
+                let t = slice.tail_at_node(k, loc, &self.distances);
+                let s = TAIL_ALBEDOS[k].powi(p);
+                [t[0] / s, t[1] / s]
+            };
+            let hi = scaled(j + 1);
+            let lo = if TAIL_ALBEDOS[j] > 0.0 { scaled(j) } else { hi };
+            let t = blend(lo, hi, u);
+            let f = weight * w * alpha.powi(p);
+            acc[0] += f * t[0];
+            acc[1] += f * t[1];
+        }
+        Ok(())
     }
 
     /// The slice indices and weights that interpolate g: one slice within 1e-9, else its neighbours.
@@ -550,7 +658,7 @@ impl ZhResponseTable {
         if d <= ds[0] {
             Loc::Below { ratio: d / ds[0] }
         } else if d >= ds[n - 1] {
-            Loc::Above { decay: (-(d - ds[n - 1])).exp() }
+            Loc::Above { decay: (-(d - ds[n - 1])).exp(), d }
         } else {
             let i = ds.partition_point(|&x| x <= d) - 1;
             Loc::Between { i, lambda: (d / ds[i]).ln() / self.log_steps[i], d }
@@ -587,8 +695,7 @@ impl ZhResponseTable {
         emitter: &Emitter,
         receiver: &Receiver,
         opts: &QueryOptions,
-        single: &mut [f64],
-        multiple: &mut [f64],
+        (single, multiple, tail): (&mut [f64], &mut [f64], &mut [f64; 2]),
     ) -> Result<(f64, [f64; 3], [f64; 3]), QueryError> {
         let sigma_s = finite_non_negative("sigma_s", medium.sigma_s)?;
         let sigma_a = finite_non_negative("sigma_a", medium.sigma_a)?;
@@ -638,6 +745,7 @@ impl ZhResponseTable {
         if !direct.is_finite() {
             return Err(invalid(format!("the direct irradiance overflowed ({direct}); check the emitter strength")));
         }
+        let with_tail = opts.tail && max_b == self.bounces;
         if sigma_s > 0.0 && max_b >= 1 {
             let alpha = sigma_s / sigma_t;
             let scale = strength;
@@ -652,13 +760,18 @@ impl ZhResponseTable {
                     };
                     if s2 > 0.0 {
                         self.accumulate(profile, 0.0, t2 * d_s, 2..=max_b, s2 / t2, scale2, multiple)?;
+                        if with_tail {
+                            self.accumulate_tail(profile, 0.0, t2 * d_s, s2 / t2, scale2, tail)?;
+                        }
                     }
                 } else {
                     self.accumulate(profile, medium.g, sigma_t * d_s, 2..=max_b, alpha, scale, multiple)?;
+                    if with_tail {
+                        self.accumulate_tail(profile, medium.g, sigma_t * d_s, alpha, scale, tail)?;
+                    }
                 }
             }
         }
-        let _ = opts.tail;
         Ok((direct, axis, n))
     }
 
@@ -675,10 +788,16 @@ impl ZhResponseTable {
         let mut single = [0.0; super::MAX_ORDER as usize];
         let mut multiple = [0.0; super::MAX_ORDER as usize];
         let (single, multiple) = (&mut single[..self.order], &mut multiple[..self.order]);
-        let (direct, axis, n) = self.lobes(medium, emitter, receiver, opts, single, multiple)?;
-        let (single, multiple) = self.shade_pair(single, multiple, dot(axis, n).clamp(-1.0, 1.0));
+        let mut tail = [0.0; 2];
+        let (direct, axis, n) = self.lobes(medium, emitter, receiver, opts, (single, multiple, &mut tail))?;
+        let cos = dot(axis, n).clamp(-1.0, 1.0);
+        let (single, multiple) = self.shade_pair(single, multiple, cos);
         let (single, multiple) = (single.max(0.0), multiple.max(0.0));
-        let tail = 0.0;
+        let tail = if self.shading.len() >= 2 {
+            (tail[0] * self.shading[0].0 + tail[1] * self.shading[1].0 * cos).max(0.0)
+        } else {
+            (tail[0] * self.shading[0].0).max(0.0)
+        };
         let multiple = multiple + tail;
         let total = direct + single + multiple;
         if !total.is_finite() {
@@ -699,12 +818,34 @@ impl ZhResponseTable {
     ) -> Result<Radiance, QueryError> {
         let mut single = vec![0.0; self.order];
         let mut multiple = vec![0.0; self.order];
-        let (_, axis, _) = self.lobes(medium, emitter, receiver, opts, &mut single, &mut multiple)?;
-        let zh: Vec<f64> = single.iter().zip(&multiple).map(|(a, b)| a + b).collect();
+        let mut tail = [0.0; 2];
+        let (_, axis, _) = self.lobes(medium, emitter, receiver, opts, (&mut single, &mut multiple, &mut tail))?;
+        let mut zh: Vec<f64> = single.iter().zip(&multiple).map(|(a, b)| a + b).collect();
+        for (z, t) in zh.iter_mut().zip(tail) {
+            *z += t;
+        }
         if zh.iter().any(|c| !c.is_finite()) {
             return Err(invalid("the radiance overflowed; check the emitter strength".into()));
         }
         let sh = sh::zh_rotate(&zh, axis);
         Ok(Radiance { zh, axis, sh })
+    }
+}
+
+/// `[c_0, c_1]` between two nodes at `λ`: `c_0` geometric when positive at both, else linear; `c_1` follows
+/// `c_0`'s ratio linearly (so `|c_1| ≤ √3 c_0` is kept when both nodes satisfy it).
+fn blend(a: [f64; 2], b: [f64; 2], lambda: f64) -> [f64; 2] {
+    if lambda <= 0.0 {
+        return a;
+    }
+    if lambda >= 1.0 {
+        return b;
+    }
+    if a[0] > 0.0 && b[0] > 0.0 {
+        let c0 = (a[0].ln() * (1.0 - lambda) + b[0].ln() * lambda).exp();
+        let shape = (1.0 - lambda) * a[1] / a[0] + lambda * b[1] / b[0];
+        [c0, c0 * shape]
+    } else {
+        [(1.0 - lambda) * a[0] + lambda * b[0], (1.0 - lambda) * a[1] + lambda * b[1]]
     }
 }
