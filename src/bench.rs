@@ -176,6 +176,10 @@ fn zh_query_rows(
                     crate::tables::zh_response::EmitterProfile::Directional => {
                         Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
                     }
+                    crate::tables::zh_response::EmitterProfile::Area => {
+                        let t = std::f64::consts::PI * u(5);
+                        Emitter::Area { intensity: 1.0, position: [0.0, 0.0, d], normal: [t.sin(), 0.0, -t.cos()] }
+                    }
                 };
                 let z = 2.0 * u(3) - 1.0;
                 let phi = std::f64::consts::TAU * u(4);

@@ -133,8 +133,8 @@ enum Command {
 
 #[derive(Subcommand)]
 enum EvalCommand {
-    /// Irradiance from a ZhResponse table on a receiver at --distance from the light (point) or below the
-    /// medium boundary (directional), its normal at --normal-angle from the direction toward the light.
+    /// Irradiance from a ZhResponse table on a receiver at --distance from the light (point, area) or below
+    /// the medium boundary (directional), its normal at --normal-angle from the direction toward the light.
     Zh(EvalZh),
 }
 
@@ -147,7 +147,8 @@ struct EvalZh {
     /// Emitter profile.
     #[arg(long, value_enum)]
     emitter: EvalEmitter,
-    /// Point: intensity (W/sr). Directional: irradiance at the medium boundary (W/m^2).
+    /// Point: intensity (W/sr). Area: intensity along the patch normal (W/sr). Directional: irradiance at
+    /// the medium boundary (W/m^2).
     #[arg(long, default_value_t = 1.0)]
     intensity: f64,
     /// Distance to the point light, or depth below the boundary toward the directional light (m).
@@ -156,6 +157,10 @@ struct EvalZh {
     /// Angle between the receiver normal and the direction toward the light (degrees).
     #[arg(long, default_value_t = 0.0)]
     normal_angle: f64,
+    /// Area emitter: angle between the patch normal and the direction from the patch to the receiver
+    /// (degrees; 0 = facing the receiver, > 90 = facing away).
+    #[arg(long, default_value_t = 0.0)]
+    patch_angle: f64,
     /// Scattering coefficient (1/m).
     #[arg(long)]
     sigma_s: f64,
@@ -187,6 +192,7 @@ struct EvalZh {
 enum EvalEmitter {
     Point,
     Directional,
+    Area,
 }
 
 fn eval_zh(a: &EvalZh) -> Result<()> {
@@ -194,6 +200,7 @@ fn eval_zh(a: &EvalZh) -> Result<()> {
     let profile = match a.emitter {
         EvalEmitter::Point => EmitterProfile::Point,
         EvalEmitter::Directional => EmitterProfile::Directional,
+        EvalEmitter::Area => EmitterProfile::Area,
     };
     let table = ZhResponseTable::open(&a.table, Some(&[profile]), Some(&[a.g])).map_err(|e| anyhow::anyhow!("{e}"))?;
     let theta = a.normal_angle.to_radians();
@@ -202,6 +209,10 @@ fn eval_zh(a: &EvalZh) -> Result<()> {
         EvalEmitter::Point => Emitter::Point { intensity: a.intensity, position: [0.0, 0.0, a.distance] },
         EvalEmitter::Directional => {
             Emitter::Directional { irradiance: a.intensity, toward_light: [0.0, 0.0, 1.0], depth: a.distance }
+        }
+        EvalEmitter::Area => {
+            let t = a.patch_angle.to_radians();
+            Emitter::Area { intensity: a.intensity, position: [0.0, 0.0, a.distance], normal: [t.sin(), 0.0, -t.cos()] }
         }
     };
     if !(a.distance.is_finite() && a.distance >= 0.0) {

@@ -82,6 +82,30 @@ fn point_and_directional_match_the_library_and_the_analytic_direct_term() {
             assert!(v["single"].as_f64().unwrap() > 0.0 && v["multiple"].as_f64().unwrap() > 0.0);
         }
     }
+    // The area emitter: a patch 1.2 m away tilted 30° from facing the receiver.
+    let o = eval(&[
+        "--emitter",
+        "area",
+        "--distance",
+        "1.2",
+        "--patch-angle",
+        "30",
+        "--sigma-s",
+        "0.9",
+        "--g",
+        "0.5",
+        "--json",
+    ]);
+    let v = json(&o);
+    let t = 30f64.to_radians();
+    let e = Emitter::Area { intensity: 1.0, position: [0.0, 0.0, 1.2], normal: [t.sin(), 0.0, -t.cos()] };
+    let r = Receiver { position: [0.0; 3], normal: [0.0, 0.0, 1.0] };
+    let want =
+        table.irradiance(&Medium { sigma_s: 0.9, sigma_a: 0.0, g: 0.5 }, &e, &r, &QueryOptions::default()).unwrap();
+    assert!((v["total"].as_f64().unwrap() - want.total).abs() <= 1e-12 * want.total);
+    let direct = t.cos() * (-0.9f64 * 1.2).exp() / (1.2 * 1.2);
+    assert!((v["direct"].as_f64().unwrap() - direct).abs() <= 1e-12 * direct);
+    assert!(v["single"].as_f64().unwrap() > 0.0 && v["tail"].as_f64().unwrap() == 0.0);
     // Human-readable output names the parts.
     let o = eval(&["--emitter", "point", "--distance", "1", "--sigma-s", "1"]);
     assert!(o.status.success(), "{}", text(&o));

@@ -71,6 +71,9 @@ pub enum EmitterProfile {
     Point,
     /// Collimated light of irradiance 1 W/m² entering a half-space; axis = depth below the boundary.
     Directional,
+    /// Differential cosine-weighted patch (intensity 1 W/sr along its normal), infinite medium; axes =
+    /// distance and the angle θ between the patch normal and the direction from the patch to the receiver.
+    Area,
 }
 
 impl EmitterProfile {
@@ -79,19 +82,23 @@ impl EmitterProfile {
         match self {
             EmitterProfile::Point => "point",
             EmitterProfile::Directional => "directional",
+            EmitterProfile::Area => "area",
         }
     }
 
-    /// The transport module's emitter.
-    pub fn transport(self) -> EmitterKind {
+    /// The transport module's emitter for the axially symmetric profiles (`None` for `Area`).
+    pub fn transport(self) -> Option<EmitterKind> {
         match self {
-            EmitterProfile::Point => EmitterKind::Point,
-            EmitterProfile::Directional => EmitterKind::Directional,
+            EmitterProfile::Point => Some(EmitterKind::Point),
+            EmitterProfile::Directional => Some(EmitterKind::Directional),
+            EmitterProfile::Area => None,
         }
     }
 
+    /// The axially symmetric profiles (one ZH lobe about the light axis per bounce).
+    pub const AXIAL: [EmitterProfile; 2] = [EmitterProfile::Point, EmitterProfile::Directional];
     /// All profiles.
-    pub const ALL: [EmitterProfile; 2] = [EmitterProfile::Point, EmitterProfile::Directional];
+    pub const ALL: [EmitterProfile; 3] = [EmitterProfile::Point, EmitterProfile::Directional, EmitterProfile::Area];
 }
 
 /// Spacing of the distance axis.
@@ -108,7 +115,7 @@ crate::declare_params! {
     /// coefficients of the incident radiance after each bounce, their sum, and the direct term.
     raw ZhResponseRaw => resolved ZhResponse, kind "ZhResponse" {
         /// Emitter profiles to tabulate, each at most once: `[Point, Directional]`.
-        emitters: Vec<EmitterProfile> = EmitterProfile::ALL.to_vec(), unit = "", range = "1 or 2 distinct of Point | Directional";
+        emitters: Vec<EmitterProfile> = EmitterProfile::ALL.to_vec(), unit = "", range = "1 to 3 distinct of Point | Directional | Area";
         /// HG mean cosines of the slices: a strictly increasing list or a grid `(min, max, count)`.
         /// Queries interpolate between slices and refuse g outside the tabulated range.
         g: GValues = GValues::List(vec![-0.5, 0.0, 0.5]), unit = "dimensionless (mean cosine)", range = "each |g| <= 0.99; 1 to 64 values, strictly increasing";
@@ -124,8 +131,11 @@ crate::declare_params! {
         distance_max: f64 = 64.0, unit = "mean free paths", range = "1 to 1000";
         /// Spacing of the distance axis: `Log` or `Linear`.
         distance_spacing: DistanceSpacing = DistanceSpacing::Log, unit = "", range = "Log | Linear";
+        /// Area emitter: samples of the patch angle θ, uniform in [0, π].
+        theta_bins: u32 = 8, unit = "samples", range = "2 to 64";
         /// Gauss nodes per panel of the graded quadrature, in both the receiver angle and along rays
-        /// (12 changes bounce 1 by < 1e-6 and bounce 2 by < 1e-4 of c_0 when doubled).
+        /// (12 changes bounce 1 by < 1e-6 and bounce 2 by < 1e-4 of c_0 when doubled). The area emitter's
+        /// 3-D rule uses half of it per panel in ψ and along rays and 5/6 of it in azimuth.
         quadrature_nodes: u32 = 12, unit = "nodes per panel", range = "2 to 64";
         /// Back-scatter compensation of Sec. 5.2: scattered light is looked up for a receiver shifted
         /// this far along its normal (the direct term is not); 0 switches it off.
@@ -212,6 +222,9 @@ impl ZhResponse {
                 "distance_min must be smaller than distance_max".into(),
             );
         }
+        if !(2..=64).contains(&self.theta_bins) {
+            issue("theta_bins", format!("theta_bins = {} is out of range", self.theta_bins), "use 2 to 64".into());
+        }
         if !(2..=64).contains(&self.quadrature_nodes) {
             issue(
                 "quadrature_nodes",
@@ -232,9 +245,27 @@ impl ZhResponse {
         issues
     }
 
-    /// Arrays per emitter profile: direct, zh, zh_sum, and tail when `tail_closure`.
+    /// Arrays per axially symmetric emitter profile: direct, zh, zh_sum, and tail when `tail_closure`
+    /// (the area profile has direct, zh and axis).
     pub fn arrays_per_emitter(&self) -> usize {
         3 + usize::from(self.tail_closure)
+    }
+
+    /// The patch angles of the area emitter (radians, uniform in `[0, π]`).
+    pub fn thetas(&self) -> Vec<f64> {
+        let n = self.theta_bins.max(2);
+        (0..n).map(|j| std::f64::consts::PI * f64::from(j) / f64::from(n - 1)).collect()
+    }
+
+    pub(crate) fn area_config(&self, g: f64) -> zh_transport::area::AreaConfig {
+        let mut cfg = zh_transport::area::AreaConfig::new(g, self.distance_axis().values_vec(), self.thetas());
+        cfg.order = self.zh_order as usize;
+        cfg.bounces = self.bounces as usize;
+        let q = self.quadrature_nodes as usize;
+        cfg.psi_nodes = (q / 2).max(1);
+        cfg.t_nodes = (q / 2).max(1);
+        cfg.phi_nodes = (5 * q / 6).max(1);
+        cfg
     }
 
     fn n_g(&self) -> u128 {
@@ -248,13 +279,24 @@ impl ZhResponse {
     /// times (f64 working copy, element copy, compressed output bounded by raw).
     pub fn estimated_bytes(&self) -> u128 {
         let lobes = u128::from(self.bounces) + 1 + if self.tail_closure { TAIL_ALBEDOS.len() as u128 } else { 0 };
-        let per_g = self.emitters.len() as u128 * (lobes * u128::from(self.distance_bins) * u128::from(self.zh_order));
+        let area = self.emitters.contains(&EmitterProfile::Area);
+        let axial = self.emitters.len() as u128 - u128::from(area);
+        let lobe_bytes = u128::from(self.distance_bins) * u128::from(self.zh_order + 1);
+        let per_g = axial * lobes * lobe_bytes + u128::from(area) * lobes * lobe_bytes * u128::from(self.theta_bins);
         self.n_g() * per_g * 24 + per_g * 8
     }
 
-    /// One unit per bounce of every (g, emitter) response.
+    /// One unit per bounce of every (g, axial emitter) response; an area response counts as 8 axial
+    /// ones (its 3-D quadrature), reported when it finishes.
     pub fn work_units(&self) -> u64 {
-        (self.n_g() as u64) * self.emitters.len() as u64 * u64::from(self.bounces)
+        (self.n_g() as u64) * self.emitters.iter().map(|e| self.units_of(*e)).sum::<u64>()
+    }
+
+    fn units_of(&self, e: EmitterProfile) -> u64 {
+        match e {
+            EmitterProfile::Area => 8 * u64::from(self.bounces),
+            _ => u64::from(self.bounces),
+        }
     }
 
     /// The distance axis (its values are exactly the distances the transport is computed at).
@@ -292,7 +334,30 @@ impl ZhResponse {
         let mut out = Vec::new();
         for e in &self.emitters {
             let p = e.prefix();
+            if *e == EmitterProfile::Area {
+                let t_axis = Axis::explicit("theta", "rad", self.thetas());
+                out.push(desc(
+                    "area_direct".into(),
+                    "unscattered irradiance per unit max(0, n.a) of a unit area emitter, canonical medium: e^-d/d^2 max(0, cos theta)".into(),
+                    "W/m^2",
+                    vec![g_axis.clone(), d_axis.clone(), t_axis.clone()],
+                ));
+                out.push(desc(
+                    "area_zh".into(),
+                    "ZH coefficients about the best-fit axis (area_axis) of the radiance after exactly b scattering events (area emitter)".into(),
+                    "W/(m^2 sr)",
+                    vec![g_axis.clone(), b_axis.clone(), d_axis.clone(), t_axis.clone(), l_axis.clone()],
+                ));
+                out.push(desc(
+                    "area_axis".into(),
+                    "angle of the best-fit ZH axis (Brent) from the light axis toward the patch normal's tangential part".into(),
+                    "rad",
+                    vec![g_axis.clone(), b_axis.clone(), d_axis.clone(), t_axis],
+                ));
+                continue;
+            }
             let direct = match e {
+                EmitterProfile::Area => "e^-d/d^2 max(0, cos theta)",
                 EmitterProfile::Point => "e^-d/d^2",
                 EmitterProfile::Directional => "e^-D",
             };
@@ -341,26 +406,29 @@ impl ZhResponse {
     pub fn generate(&self, _key: &[u8; 32], progress: Progress<'_>) -> Result<Generated, GenerateError> {
         let descs = self.descs();
         let gs = self.g.values();
-        // responses[e][gi]
-        let mut responses = Vec::with_capacity(self.emitters.len());
-        for e in &self.emitters {
-            let mut per_g = Vec::with_capacity(gs.len());
-            for &g in &gs {
-                let r = zh_transport::compute_with_progress(e.transport(), &self.transport_config(g), &|| progress(1))
-                    .map_err(|m| GenerateError::Layout(format!("{} transport for g = {g}: {m}", e.prefix())))?;
-                per_g.push(r);
-            }
-            responses.push(per_g);
-        }
         let help = "a ZH coefficient overflowed the element type; use element: F64";
         let mut values = Vec::with_capacity(descs.len());
         let mut discarded = 0u64;
         let mut tail_energy = Vec::new();
-        for (ei, per_g) in responses.iter().enumerate() {
+        let mut at = 0;
+        for e in &self.emitters {
+            let Some(kind) = e.transport() else {
+                let (vals, bad) = self.generate_area(&gs, &descs[at..at + 3], progress, help)?;
+                values.extend(vals);
+                discarded += bad;
+                at += 3;
+                continue;
+            };
+            let mut per_g = Vec::with_capacity(gs.len());
+            for &g in &gs {
+                let r = zh_transport::compute_with_progress(kind, &self.transport_config(g), &|| progress(1))
+                    .map_err(|m| GenerateError::Layout(format!("{} transport for g = {g}: {m}", e.prefix())))?;
+                per_g.push(r);
+            }
             let direct: Vec<f64> = per_g.iter().flat_map(|r| r.direct.iter().copied()).collect();
             let mut zh = Vec::new();
             let mut sum = Vec::new();
-            for r in per_g {
+            for r in &per_g {
                 for rows in &r.bounces {
                     for row in rows {
                         zh.extend_from_slice(row);
@@ -379,9 +447,9 @@ impl ZhResponse {
                 }
             }
             let k = self.arrays_per_emitter();
-            values.push(to_element(&descs[k * ei], direct, help)?);
-            values.push(to_element(&descs[k * ei + 1], zh, help)?);
-            values.push(to_element(&descs[k * ei + 2], sum, help)?);
+            values.push(to_element(&descs[at], direct, help)?);
+            values.push(to_element(&descs[at + 1], zh, help)?);
+            values.push(to_element(&descs[at + 2], sum, help)?);
             if self.tail_closure {
                 let mut tail = Vec::new();
                 for (r, &g) in per_g.iter().zip(&gs) {
@@ -395,17 +463,59 @@ impl ZhResponse {
                     *x = 0.0;
                     discarded += 1;
                 }
-                values.push(to_element(&descs[k * ei + 3], tail, help)?);
+                values.push(to_element(&descs[at + 3], tail, help)?);
                 for (r, &g) in per_g.iter().zip(&gs) {
                     for d in TAIL_REPORT_DISTANCES {
-                        tail_energy.push((self.emitters[ei], g, d, tail::tail_energy_ratio(r, g, 1.0, d)));
+                        tail_energy.push((*e, g, d, tail::tail_energy_ratio(r, g, 1.0, d)));
                     }
                 }
             }
+            at += k;
         }
         let errors = tail_energy_estimates(&tail_energy);
         let stats = GenStats { nonfinite_discarded: discarded, samples: 0, errors };
         Ok(Generated { arrays: descs, values, stats })
+    }
+
+    /// The area emitter's three arrays (direct, zh, axis) over every g slice, and the count of non-finite
+    /// values replaced by 0.
+    fn generate_area(
+        &self,
+        gs: &[f64],
+        descs: &[ArrayDesc],
+        progress: Progress<'_>,
+        help: &str,
+    ) -> Result<(Vec<crate::container::ArrayValues>, u64), GenerateError> {
+        let (mut direct, mut zh, mut axis) = (Vec::new(), Vec::new(), Vec::new());
+        for &g in gs {
+            let r = zh_transport::area::compute(&self.area_config(g))
+                .map_err(|m| GenerateError::Layout(format!("area transport for g = {g}: {m}")))?;
+            progress(self.units_of(EmitterProfile::Area));
+            direct.extend(r.direct.iter().flatten().copied());
+            for rows in &r.bounces {
+                for row in rows {
+                    for entry in row {
+                        zh.extend_from_slice(&entry.zh);
+                        axis.push(entry.theta_fit);
+                    }
+                }
+            }
+        }
+        let mut bad = 0u64;
+        for v in [&mut direct, &mut zh, &mut axis] {
+            for x in v.iter_mut().filter(|x| !x.is_finite()) {
+                *x = 0.0;
+                bad += 1;
+            }
+        }
+        Ok((
+            vec![
+                to_element(&descs[0], direct, help)?,
+                to_element(&descs[1], zh, help)?,
+                to_element(&descs[2], axis, help)?,
+            ],
+            bad,
+        ))
     }
 }
 
@@ -459,6 +569,10 @@ pub fn walk_reference(
         EmitterProfile::Directional => {
             walk::Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
         }
+        // Patch facing the receiver (θ = 0).
+        EmitterProfile::Area => {
+            walk::Emitter::Area { intensity: 1.0, position: [0.0, 0.0, d], normal: [0.0, 0.0, -1.0] }
+        }
     };
     let medium = walk::Medium { sigma_s: alpha, sigma_a: 1.0 - alpha, g };
     let r = walk::irradiance(&emitter, &medium, [0.0, 0.0, 1.0], &walk::WalkConfig::new(photons, k_max, seed))?;
@@ -506,6 +620,7 @@ fn compare(
         EmitterProfile::Directional => {
             Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
         }
+        EmitterProfile::Area => Emitter::Area { intensity: 1.0, position: [0.0, 0.0, d], normal: [0.0, 0.0, -1.0] },
     };
     let receiver = Receiver { position: [0.0; 3], normal: [0.0, 0.0, 1.0] };
     let got = table.irradiance(&medium, &emitter, &receiver, &opts).map_err(|e| e.to_string())?;
@@ -642,6 +757,9 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
                             EmitterProfile::Directional => {
                                 Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
                             }
+                            EmitterProfile::Area => {
+                                Emitter::Area { intensity: 1.0, position: [0.0, 0.0, d], normal: [0.6, 0.0, -0.8] }
+                            }
                         };
                         let s = (1.0 - cos_n * cos_n).sqrt();
                         let receiver = Receiver { position: [0.0; 3], normal: [s, 0.0, cos_n] };
@@ -684,10 +802,12 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
             EmitterProfile::Directional => {
                 Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: d }
             }
+            EmitterProfile::Area => Emitter::Area { intensity: 1.0, position: [0.0, 0.0, d], normal: [0.6, 0.0, -0.8] },
         };
         let want = match profile {
             EmitterProfile::Point => (-0.5 * d).exp() * cos_n / (d * d),
             EmitterProfile::Directional => (-0.5 * d).exp() * cos_n,
+            EmitterProfile::Area => 0.8 * (-0.5 * d).exp() * cos_n / (d * d),
         };
         let receiver = Receiver { position: [0.0; 3], normal: [0.8, 0.0, cos_n] };
         let medium = Medium { sigma_s: 0.0, sigma_a: 0.5, g: 0.0 };

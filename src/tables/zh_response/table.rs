@@ -38,6 +38,7 @@ use std::path::Path;
 use super::{EmitterProfile, TAIL_ALBEDOS, ZhResponse, ZhResponseRaw};
 use crate::container::{ArrayDesc, ArrayValues};
 use crate::physics::sh;
+use crate::physics::zh_transport::area::{AreaEntry, AreaResponse};
 use crate::physics::zh_transport::tail;
 use crate::tables::TableDef;
 
@@ -46,6 +47,10 @@ pub fn array_names(def: &ZhResponse) -> Vec<String> {
     let mut out = Vec::new();
     for e in &def.emitters {
         let p = e.prefix();
+        if *e == EmitterProfile::Area {
+            out.extend(["area_direct".to_string(), "area_zh".into(), "area_axis".into()]);
+            continue;
+        }
         out.extend([format!("{p}_direct"), format!("{p}_zh"), format!("{p}_zh_sum")]);
         if def.tail_closure {
             out.push(format!("{p}_tail"));
@@ -123,6 +128,15 @@ pub enum Emitter {
         /// Distance from the receiver to the boundary along `toward_light` (m), finite, ≥ 0.
         depth: f64,
     },
+    /// Differential cosine-weighted patch (an area light element, or a surface reflecting light).
+    Area {
+        /// Radiant intensity along the patch normal (W/sr); `intensity · max(0, normal·u)` toward `u`.
+        intensity: f64,
+        /// Position (m).
+        position: [f64; 3],
+        /// Patch normal (any finite non-zero vector).
+        normal: [f64; 3],
+    },
 }
 
 impl Emitter {
@@ -130,6 +144,7 @@ impl Emitter {
         match self {
             Emitter::Point { .. } => EmitterProfile::Point,
             Emitter::Directional { .. } => EmitterProfile::Directional,
+            Emitter::Area { .. } => EmitterProfile::Area,
         }
     }
 }
@@ -374,6 +389,10 @@ pub struct ZhResponseTable {
     /// Back-scatter shift ε (mean free paths) the table was made for.
     pub backscatter_shift: f64,
     slices: Vec<Slice>,
+    /// Loaded area-emitter slices: (g index, response).
+    area: Vec<(usize, AreaResponse)>,
+    /// Patch angles of the area emitter (radians).
+    pub thetas: Vec<f64>,
     /// `ln(d_{i+1}/d_i)` per interval.
     log_steps: Vec<f64>,
     /// Per band `l`: (clamped-cosine coefficient `A_l`, `(2l − 1)/l`, `(l − 1)/l`) — the Appendix A dot
@@ -481,6 +500,18 @@ impl ZhResponseTable {
         let names: Vec<String> = h.arrays.iter().map(|a| a.name.clone()).collect();
         let index = |name: String| names.iter().position(|n| *n == name);
         for profile in profiles {
+            if profile == EmitterProfile::Area {
+                let idx = |name: &str| index(name.into()).ok_or_else(|| layout(format!("lacks the {name} array")));
+                let (di, zi, ai) = (idx("area_direct")?, idx("area_zh")?, idx("area_axis")?);
+                for &gi in &gis {
+                    let direct = r.read_slice(di, gi as u64).map_err(container)?.to_f64();
+                    let zh = r.read_slice(zi, gi as u64).map_err(container)?.to_f64();
+                    let axis = r.read_slice(ai, gi as u64).map_err(container)?.to_f64();
+                    let resp = table.make_area(&direct, &zh, &axis).map_err(layout)?;
+                    table.area.push((gi, resp));
+                }
+                continue;
+            }
             let zh_index = index(format!("{}_zh", profile.prefix()))
                 .ok_or_else(|| layout(format!("lacks the {}_zh array", profile.prefix())))?;
             let tail_index = index(format!("{}_tail", profile.prefix()));
@@ -500,7 +531,6 @@ impl ZhResponseTable {
     /// With `values` empty only the layout is checked and nothing is loaded.
     pub fn from_arrays(def: &ZhResponse, descs: &[ArrayDesc], values: &[ArrayValues]) -> Result<Self, String> {
         let want = array_names(def);
-        let k = def.arrays_per_emitter();
         let names: Vec<&str> = descs.iter().map(|d| d.name.as_str()).collect();
         if names != want {
             return Err(format!("unexpected ZhResponse arrays {names:?}; expected {want:?}"));
@@ -509,13 +539,17 @@ impl ZhResponseTable {
         let bounces = def.bounces as usize;
         let order = def.zh_order as usize;
         let distances = def.distance_axis().values_vec();
-        for (i, d) in descs.iter().enumerate() {
+        let (ng, nb, nd, nt) = (g.len() as u64, bounces as u64, distances.len() as u64, u64::from(def.theta_bins));
+        for d in descs {
             let shape = d.shape();
-            let expect: Vec<u64> = match i % k {
-                0 => vec![g.len() as u64, distances.len() as u64],
-                1 => vec![g.len() as u64, bounces as u64, distances.len() as u64, order as u64],
-                2 => vec![g.len() as u64, distances.len() as u64, order as u64],
-                _ => vec![g.len() as u64, TAIL_ALBEDOS.len() as u64, distances.len() as u64, 2],
+            let expect: Vec<u64> = match d.name.as_str() {
+                "area_direct" => vec![ng, nd, nt],
+                "area_zh" => vec![ng, nb, nd, nt, order as u64],
+                "area_axis" => vec![ng, nb, nd, nt],
+                n if n.ends_with("_direct") => vec![ng, nd],
+                n if n.ends_with("_zh") => vec![ng, nb, nd, order as u64],
+                n if n.ends_with("_zh_sum") => vec![ng, nd, order as u64],
+                _ => vec![ng, TAIL_ALBEDOS.len() as u64, nd, 2],
             };
             if shape != expect {
                 return Err(format!("array {} has shape {shape:?}, expected {expect:?} from the definition", d.name));
@@ -532,6 +566,8 @@ impl ZhResponseTable {
             distances,
             backscatter_shift: def.backscatter_shift,
             slices: Vec::new(),
+            area: Vec::new(),
+            thetas: def.thetas(),
             log_steps: Vec::new(),
             shading: sh::clamped_cosine_zh(order)
                 .into_iter()
@@ -551,9 +587,25 @@ impl ZhResponseTable {
         }
         let per_g = bounces * table.distances.len() * order;
         let per_g_tail = TAIL_ALBEDOS.len() * table.distances.len() * 2;
-        for (ei, &profile) in def.emitters.iter().enumerate() {
-            let all = values[k * ei + 1].to_f64();
-            let tails = if def.tail_closure { values[k * ei + 3].to_f64() } else { Vec::new() };
+        let named = |name: String| values[want.iter().position(|n| *n == name).unwrap_or(0)].to_f64();
+        for &profile in &def.emitters {
+            if profile == EmitterProfile::Area {
+                let (direct, zh, axis) =
+                    (named("area_direct".into()), named("area_zh".into()), named("area_axis".into()));
+                let (pd, pz, pa) = (direct.len() / g_len(&table), zh.len() / g_len(&table), axis.len() / g_len(&table));
+                for gi in 0..table.g.len() {
+                    let r = table.make_area(
+                        &direct[gi * pd..(gi + 1) * pd],
+                        &zh[gi * pz..(gi + 1) * pz],
+                        &axis[gi * pa..(gi + 1) * pa],
+                    )?;
+                    table.area.push((gi, r));
+                }
+                continue;
+            }
+            let p = profile.prefix();
+            let all = named(format!("{p}_zh"));
+            let tails = if def.tail_closure { named(format!("{p}_tail")) } else { Vec::new() };
             for gi in 0..table.g.len() {
                 let tail = if def.tail_closure { &tails[gi * per_g_tail..(gi + 1) * per_g_tail] } else { &[][..] };
                 let slice = table.make_slice(profile, gi, &all[gi * per_g..(gi + 1) * per_g], tail)?;
@@ -561,6 +613,34 @@ impl ZhResponseTable {
             }
         }
         Ok(table)
+    }
+
+    /// An area response from one g slice of `area_direct`, `area_zh` and `area_axis` (file layouts).
+    fn make_area(&self, direct: &[f64], zh: &[f64], axis: &[f64]) -> Result<AreaResponse, String> {
+        let (nd, nt, n) = (self.distances.len(), self.thetas.len(), self.order);
+        if direct.len() != nd * nt || zh.len() != self.bounces * nd * nt * n || axis.len() != self.bounces * nd * nt {
+            return Err("area arrays do not match the definition's axes".into());
+        }
+        let direct = direct.chunks(nt).map(<[f64]>::to_vec).collect();
+        let bounces = (0..self.bounces)
+            .map(|b| {
+                (0..nd)
+                    .map(|i| {
+                        (0..nt)
+                            .map(|j| {
+                                let cell = (b * nd + i) * nt + j;
+                                AreaEntry {
+                                    zh: zh[cell * n..(cell + 1) * n].to_vec(),
+                                    theta_fit: axis[cell],
+                                    fit_error: 0.0,
+                                }
+                            })
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        AreaResponse::from_parts(self.distances.clone(), self.thetas.clone(), direct, bounces)
     }
 
     fn make_slice(&self, profile: EmitterProfile, gi: usize, values: &[f64], tail: &[f64]) -> Result<Slice, String> {
@@ -734,6 +814,7 @@ impl ZhResponseTable {
                 let (d_s, axis) = if d2 > 0.0 { (d2, s2.map(|c| c / d2)) } else { (d, a) };
                 (direct, intensity * sigma_t * sigma_t, d_s, axis)
             }
+            Emitter::Area { .. } => return Err(invalid("internal: area emitters take the area path".into())),
             Emitter::Directional { irradiance, toward_light, depth } => {
                 let e0 = finite_non_negative("irradiance", irradiance)?;
                 let a = unit("toward_light", toward_light)?;
@@ -755,7 +836,7 @@ impl ZhResponseTable {
                     let s2 = (1.0 - medium.g) * sigma_s;
                     let t2 = s2 + sigma_a;
                     let scale2 = match profile {
-                        EmitterProfile::Point => strength / (sigma_t * sigma_t) * t2 * t2,
+                        EmitterProfile::Point | EmitterProfile::Area => strength / (sigma_t * sigma_t) * t2 * t2,
                         EmitterProfile::Directional => strength,
                     };
                     if s2 > 0.0 {
@@ -775,6 +856,113 @@ impl ZhResponseTable {
         Ok((direct, axis, n))
     }
 
+    /// The area emitter's scattered lobes in world space: calls `visit(b, lobe, axis)` for each order
+    /// `b ≥ 1` (weighted by the remapping, the albedo power and the g interpolation; several calls per
+    /// order when two g slices are blended) and returns the direct irradiance. The patch angle θ is taken
+    /// between the patch normal and the direction from the patch to the (shifted) receiver; the stored
+    /// axis angle turns from the light axis toward the tangential part of the patch normal. No tail.
+    fn area_lobes(
+        &self,
+        medium: &Medium,
+        emitter: &Emitter,
+        receiver: &Receiver,
+        opts: &QueryOptions,
+        visit: LobeVisitor<'_>,
+    ) -> Result<f64, QueryError> {
+        let Emitter::Area { intensity, position, normal } = *emitter else {
+            return Err(invalid("internal: not an area emitter".into()));
+        };
+        let sigma_s = finite_non_negative("sigma_s", medium.sigma_s)?;
+        let sigma_a = finite_non_negative("sigma_a", medium.sigma_a)?;
+        if !(medium.g.is_finite() && medium.g.abs() < 1.0) {
+            return Err(invalid(format!("g = {} must lie in (-1, 1)", medium.g)));
+        }
+        let intensity = finite_non_negative("intensity", intensity)?;
+        let p = finite3("emitter position", position)?;
+        let ne = unit("emitter normal", normal)?;
+        let x = finite3("receiver position", receiver.position)?;
+        let n = unit("receiver normal", receiver.normal)?;
+        if !self.emitters.contains(&EmitterProfile::Area) {
+            return Err(QueryError::NotLoaded(format!("the table has no Area responses ({:?})", self.emitters)));
+        }
+        let s = [p[0] - x[0], p[1] - x[1], p[2] - x[2]];
+        let d = dot(s, s).sqrt();
+        if d == 0.0 {
+            return Err(invalid("the receiver is at the area emitter: the irradiance is infinite; move it off".into()));
+        }
+        let a = s.map(|c| c / d);
+        let sigma_t = sigma_s + sigma_a;
+        let direct = intensity * (-dot(ne, a)).max(0.0) * (-sigma_t * d).exp() * dot(n, a).max(0.0) / (d * d);
+        if !direct.is_finite() {
+            return Err(invalid(format!("the direct irradiance overflowed ({direct}); check the emitter strength")));
+        }
+        let max_b = opts.max_bounce.unwrap_or(self.bounces).min(self.bounces);
+        if sigma_s == 0.0 || max_b == 0 {
+            return Ok(direct);
+        }
+        let shift = if opts.backscatter { (self.backscatter_shift / sigma_t).min(0.5 * d) } else { 0.0 };
+        let xs = [x[0] + shift * n[0], x[1] + shift * n[1], x[2] + shift * n[2]];
+        let s2 = [p[0] - xs[0], p[1] - xs[1], p[2] - xs[2]];
+        let d2 = dot(s2, s2).sqrt();
+        let (d_s, a_s) = if d2 > 0.0 { (d2, s2.map(|c| c / d2)) } else { (d, a) };
+        let cos_theta = (-dot(ne, a_s)).clamp(-1.0, 1.0);
+        let theta = cos_theta.acos();
+        // Tangential direction of the patch normal (any perpendicular when the normal is along the axis).
+        let t = [ne[0] + cos_theta * a_s[0], ne[1] + cos_theta * a_s[1], ne[2] + cos_theta * a_s[2]];
+        let tl = dot(t, t).sqrt();
+        let e = if tl > 1e-12 {
+            t.map(|c| c / tl)
+        } else {
+            let helper = if a_s[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+            let c = dot(helper, a_s);
+            let v = [helper[0] - c * a_s[0], helper[1] - c * a_s[1], helper[2] - c * a_s[2]];
+            let l = dot(v, v).sqrt();
+            v.map(|c| c / l)
+        };
+        let world = |ax: [f64; 3]| {
+            let w = [ax[0] * e[0] + ax[2] * a_s[0], ax[0] * e[1] + ax[2] * a_s[1], ax[0] * e[2] + ax[2] * a_s[2]];
+            let l = dot(w, w).sqrt();
+            if l > 0.0 { w.map(|c| c / l) } else { a_s }
+        };
+        let mut run = |g: f64, s_eff: f64, orders: std::ops::RangeInclusive<usize>| -> Result<(), QueryError> {
+            let t_eff = s_eff + sigma_a;
+            let alpha = s_eff / t_eff;
+            let scale = intensity * t_eff * t_eff;
+            for (gi, w) in self.bracket(g)? {
+                if w == 0.0 {
+                    continue;
+                }
+                let resp = self.area.iter().find(|(i, _)| *i == gi).map(|(_, r)| r).ok_or_else(|| {
+                    QueryError::NotLoaded(format!("the Area slice for g = {} is not loaded", self.g[gi]))
+                })?;
+                for b in orders.clone() {
+                    let weight = scale * w * alpha.powi(b as i32);
+                    if weight == 0.0 {
+                        break;
+                    }
+                    let (mut lobe, ax) = resp.lobe_at(b, t_eff * d_s, theta);
+                    for c in &mut lobe {
+                        *c *= weight;
+                    }
+                    visit(b, &lobe, world(ax));
+                }
+            }
+            Ok(())
+        };
+        run(medium.g, sigma_s, 1..=1)?;
+        if max_b >= 2 {
+            if opts.similarity {
+                let s2 = (1.0 - medium.g) * sigma_s;
+                if s2 > 0.0 {
+                    run(0.0, s2, 2..=max_b)?;
+                }
+            } else {
+                run(medium.g, sigma_s, 2..=max_b)?;
+            }
+        }
+        Ok(direct)
+    }
+
     /// Irradiance on `receiver` (W/m²) split by order; see the module doc for the remapping. Each
     /// scattered part is clamped at 0 (a band-limited lobe can ring slightly negative on normals facing
     /// away). Errors name the offending argument, a g outside the table, or a slice not loaded.
@@ -788,6 +976,20 @@ impl ZhResponseTable {
         let mut single = [0.0; super::MAX_ORDER as usize];
         let mut multiple = [0.0; super::MAX_ORDER as usize];
         let (single, multiple) = (&mut single[..self.order], &mut multiple[..self.order]);
+        if let Emitter::Area { .. } = emitter {
+            let n = unit("receiver normal", receiver.normal)?;
+            let (mut single, mut multiple) = (0.0, 0.0);
+            let direct = self.area_lobes(medium, emitter, receiver, opts, &mut |b, lobe, axis| {
+                let e = sh::zh_irradiance(lobe, axis, n);
+                if b == 1 { single += e } else { multiple += e }
+            })?;
+            let (single, multiple) = (single.max(0.0), multiple.max(0.0));
+            let total = direct + single + multiple;
+            if !total.is_finite() {
+                return Err(invalid(format!("the irradiance overflowed ({total}); check the emitter strength")));
+            }
+            return Ok(Irradiance { direct, single, multiple, tail: 0.0, total });
+        }
         let mut tail = [0.0; 2];
         let (direct, axis, n) = self.lobes(medium, emitter, receiver, opts, (single, multiple, &mut tail))?;
         let cos = dot(axis, n).clamp(-1.0, 1.0);
@@ -816,6 +1018,23 @@ impl ZhResponseTable {
         receiver: &Receiver,
         opts: &QueryOptions,
     ) -> Result<Radiance, QueryError> {
+        if let Emitter::Area { .. } = emitter {
+            let mut sh_sum = vec![0.0; self.order * self.order];
+            let mut first_axis = [0.0, 0.0, 1.0];
+            self.area_lobes(medium, emitter, receiver, opts, &mut |b, lobe, axis| {
+                if b == 1 {
+                    first_axis = axis;
+                }
+                for (s, x) in sh_sum.iter_mut().zip(sh::zh_rotate(lobe, axis)) {
+                    *s += x;
+                }
+            })?;
+            if sh_sum.iter().any(|c| !c.is_finite()) {
+                return Err(invalid("the radiance overflowed; check the emitter strength".into()));
+            }
+            let zh = sh::zh_project_about(&sh_sum, first_axis);
+            return Ok(Radiance { zh, axis: first_axis, sh: sh_sum });
+        }
         let mut single = vec![0.0; self.order];
         let mut multiple = vec![0.0; self.order];
         let mut tail = [0.0; 2];
@@ -848,4 +1067,12 @@ fn blend(a: [f64; 2], b: [f64; 2], lambda: f64) -> [f64; 2] {
     } else {
         [(1.0 - lambda) * a[0] + lambda * b[0], (1.0 - lambda) * a[1] + lambda * b[1]]
     }
+}
+
+/// Receives one weighted lobe of an area emitter: (order b, ZH coefficients, world axis).
+type LobeVisitor<'a> = &'a mut dyn FnMut(usize, &[f64], [f64; 3]);
+
+/// Number of g slices (at least 1, for dividing flat arrays).
+fn g_len(t: &ZhResponseTable) -> usize {
+    t.g.len().max(1)
 }

@@ -616,6 +616,49 @@ pub fn brent_max(f: impl Fn(f64) -> f64, lo: f64, mid: f64, hi: f64, tol: f64, m
 }
 
 impl AreaResponse {
+    /// Rebuilds a response from stored parts (a table file), checking what the lookups index: at least
+    /// one distance (positive, strictly increasing), angles in `[0, π]` strictly increasing, `direct`
+    /// `[d][θ]`, `bounces[b − 1][d][θ]` with lobes of one common order ≥ 1, all values finite.
+    ///
+    /// # Errors
+    /// A message naming the first inconsistency.
+    pub fn from_parts(
+        distances: Vec<f64>,
+        thetas: Vec<f64>,
+        direct: Vec<Vec<f64>>,
+        bounces: Vec<Vec<Vec<AreaEntry>>>,
+    ) -> Result<Self, String> {
+        let (nd, nt) = (distances.len(), thetas.len());
+        if nd == 0 || !distances.iter().all(|d| d.is_finite() && *d > 0.0) || distances.windows(2).any(|w| w[0] >= w[1])
+        {
+            return Err("area distances must be positive and strictly increasing".into());
+        }
+        if nt == 0 || !thetas.iter().all(|t| (0.0..=PI).contains(t)) || thetas.windows(2).any(|w| w[0] >= w[1]) {
+            return Err("area angles must lie in [0, pi] and increase strictly".into());
+        }
+        if direct.len() != nd || direct.iter().any(|r| r.len() != nt || r.iter().any(|v| !v.is_finite())) {
+            return Err("area direct term has the wrong shape or a non-finite value".into());
+        }
+        let order = bounces.first().and_then(|t| t.first()).and_then(|r| r.first()).map_or(1, |e| e.zh.len());
+        for table in &bounces {
+            if table.len() != nd
+                || table.iter().any(|row| {
+                    row.len() != nt
+                        || row.iter().any(|e| {
+                            e.zh.len() != order
+                                || order == 0
+                                || !e.theta_fit.is_finite()
+                                || e.zh.iter().any(|c| !c.is_finite())
+                        })
+                })
+            {
+                return Err("area lobes have the wrong shape or a non-finite value".into());
+            }
+        }
+        let cos_thetas = thetas.iter().map(|t| t.cos()).collect();
+        Ok(Self { distances, thetas, direct, bounces, cos_thetas })
+    }
+
     fn order(&self) -> usize {
         self.bounces.first().and_then(|t| t.first()).and_then(|r| r.first()).map_or(0, |e| e.zh.len())
     }
