@@ -72,10 +72,37 @@ fn with_level(def: &TableDef, level: i32) -> TableDef {
     }
 }
 
+/// What to benchmark.
+#[derive(Debug, Clone, Default)]
+pub struct BenchOptions {
+    /// Only these table ids (all when empty).
+    pub only: Vec<String>,
+    /// Skip the whole-pipeline compile comparisons.
+    pub tables_only: bool,
+}
+
 /// Runs the benchmarks.
-pub fn run(p: &ValidatedPipeline) -> Result<Vec<BenchRow>, BenchError> {
+pub fn run(p: &ValidatedPipeline, bench: &BenchOptions) -> Result<Vec<BenchRow>, BenchError> {
     let scratch = tempfile::Builder::new().prefix("voltab-bench-").tempdir().map_err(BenchError::Scratch)?;
-    let opts = |dir: &str, jobs| CompileOptions { out_dir: scratch.path().join(dir), jobs, ..Default::default() };
+    let opts = |dir: &str, jobs| CompileOptions {
+        out_dir: scratch.path().join(dir),
+        jobs,
+        only: bench.only.clone(),
+        ..Default::default()
+    };
+    let mut rows = Vec::new();
+    if !bench.tables_only {
+        rows.extend(compile_rows(p, &opts)?);
+    }
+    per_table_rows(p, bench, &mut rows)?;
+    Ok(rows)
+}
+
+/// Cold vs up-to-date compile, 1 vs N threads.
+fn compile_rows(
+    p: &ValidatedPipeline,
+    opts: &dyn Fn(&str, Option<usize>) -> CompileOptions,
+) -> Result<Vec<BenchRow>, BenchError> {
     let mut rows = Vec::new();
 
     let t = Instant::now();
@@ -105,8 +132,13 @@ pub fn run(p: &ValidatedPipeline) -> Result<Vec<BenchRow>, BenchError> {
         note: String::new(),
     });
 
+    Ok(rows)
+}
+
+/// Per table: zstd levels, and query throughput for ZhResponse tables.
+fn per_table_rows(p: &ValidatedPipeline, bench: &BenchOptions, rows: &mut Vec<BenchRow>) -> Result<(), BenchError> {
     let limits = Limits::from_machine();
-    for table in p.tables() {
+    for table in p.tables().iter().filter(|t| bench.only.is_empty() || bench.only.iter().any(|o| o == t.id())) {
         let generated = table.def().generate(table.key(), &|_| {}).map_err(|e| BenchError::Variant(e.to_string()))?;
         let mut sizes = Vec::new();
         let mut times = Vec::new();
@@ -135,7 +167,7 @@ pub fn run(p: &ValidatedPipeline) -> Result<Vec<BenchRow>, BenchError> {
             });
         }
     }
-    Ok(rows)
+    Ok(())
 }
 
 /// Queries per configuration set in the ZH query benchmark.

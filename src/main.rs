@@ -107,6 +107,13 @@ enum Command {
         /// Print the rows as JSON.
         #[arg(long)]
         json: bool,
+        /// Only tables with these ids (all when absent).
+        #[arg(long, num_args = 1..)]
+        only: Vec<String>,
+        /// Skip the whole-pipeline compile comparisons (cold vs up-to-date, 1 vs N threads), which compile
+        /// the pipeline three times; keep the per-table rows (zstd levels, ZH query throughput).
+        #[arg(long)]
+        tables_only: bool,
     },
     /// Evaluate a compiled table at one configuration.
     Eval {
@@ -391,9 +398,9 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             print!("{}", voltab::report::markdown(&r));
             println!("wrote {}/report.json, report.md and {} plots", out.display(), r.tables.len());
         }
-        Command::Bench { pipeline, json } => {
+        Command::Bench { pipeline, json, only, tables_only } => {
             let p = load(&pipeline)?;
-            let rows = voltab::bench::run(&p)?;
+            let rows = voltab::bench::run(&p, &voltab::bench::BenchOptions { only, tables_only })?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&rows)?);
             } else {

@@ -644,9 +644,15 @@ impl ZhResponse {
     pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
         let table = ZhResponseTable::from_arrays(self, &generated.arrays, &generated.values)?;
         let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
-        let (mut single, mut total, mut noise) = (0.0f64, 0.0f64, 0.0f64);
+        let mut noise = 0.0f64;
         let mut photons = 0u64;
+        let mut errors = Vec::new();
+        let how = format!(
+            "facing receiver (area: patch facing it), d in {{0.5, 2}} mfp, g {:?}, vs reference::walk ({SIDECAR_WALK_PHOTONS} photons per case)",
+            self.probe_gs()
+        );
         for &profile in &self.emitters {
+            let (mut single, mut total) = (0.0f64, 0.0f64);
             for g in self.probe_gs() {
                 for d in [0.5, 2.0] {
                     let reference = walk_reference(profile, g, d, self.bounces as usize, SIDECAR_WALK_PHOTONS, seed)?;
@@ -657,21 +663,19 @@ impl ZhResponse {
                     noise = noise.max(reference.2[0] / reference.1[0]);
                 }
             }
+            let p = profile.prefix();
+            errors.push(ErrorEstimate { name: format!("{p}_single_max_rel_vs_walk"), value: single, how: how.clone() });
+            errors.push(ErrorEstimate {
+                name: format!("{p}_orders_le_b_max_rel_vs_walk"),
+                value: total,
+                how: how.clone(),
+            });
         }
-        let how = format!(
-            "facing receiver, d in {{0.5, 2}} mfp, emitters {:?}, g {:?}, vs reference::walk ({SIDECAR_WALK_PHOTONS} photons per case)",
-            self.emitters,
-            self.probe_gs()
-        );
-        let mut errors = vec![
-            ErrorEstimate { name: "single_max_rel_vs_walk".into(), value: single, how: how.clone() },
-            ErrorEstimate { name: "orders_le_b_max_rel_vs_walk".into(), value: total, how: how.clone() },
-            ErrorEstimate {
-                name: "walk_single_rel_std_error".into(),
-                value: noise,
-                how: "largest relative standard error of the walk's single-scattering estimate (noise floor)".into(),
-            },
-        ];
+        errors.push(ErrorEstimate {
+            name: "walk_single_rel_std_error".into(),
+            value: noise,
+            how: "largest relative standard error of the walk's single-scattering estimate (noise floor)".into(),
+        });
         errors.extend(generated.stats.errors.iter().cloned());
         Ok(GenStats { nonfinite_discarded: generated.stats.nonfinite_discarded, samples: photons, errors })
     }
