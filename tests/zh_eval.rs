@@ -26,7 +26,11 @@ fn compiled() -> &'static (tempfile::TempDir, std::path::PathBuf) {
 }
 
 fn eval(args: &[&str]) -> std::process::Output {
-    let (_, table) = compiled();
+    eval_table(&compiled().1, args)
+}
+
+/// `voltab eval zh --table <table> <args>`.
+fn eval_table(table: &std::path::Path, args: &[&str]) -> std::process::Output {
     voltab().args(["eval", "zh", "--table", table.to_str().unwrap()]).args(args).output().unwrap()
 }
 
@@ -129,58 +133,16 @@ fn bad_tables_and_arguments_are_clear_errors() {
     assert!(!o.status.success() && text(&o).contains("at the point light"), "{}", text(&o));
     // A PhaseHg table, a missing file and a truncated copy.
     let hg = path.with_file_name("hg.vtab");
-    let o = voltab()
-        .args([
-            "eval",
-            "zh",
-            "--table",
-            hg.to_str().unwrap(),
-            "--emitter",
-            "point",
-            "--distance",
-            "1",
-            "--sigma-s",
-            "1",
-        ])
-        .output()
-        .unwrap();
+    let o = eval_table(&hg, &["--emitter", "point", "--distance", "1", "--sigma-s", "1"]);
     assert!(!o.status.success() && text(&o).contains("holds a PhaseHg table, not ZhResponse"), "{}", text(&o));
     let d = tempdir();
     let missing = d.path().join("nope.vtab");
-    let o = voltab()
-        .args([
-            "eval",
-            "zh",
-            "--table",
-            missing.to_str().unwrap(),
-            "--emitter",
-            "point",
-            "--distance",
-            "1",
-            "--sigma-s",
-            "1",
-        ])
-        .output()
-        .unwrap();
+    let o = eval_table(&missing, &["--emitter", "point", "--distance", "1", "--sigma-s", "1"]);
     assert!(!o.status.success() && text(&o).contains("nope.vtab"), "{}", text(&o));
     let bytes = std::fs::read(path).unwrap();
     let cut = d.path().join("cut.vtab");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
-    let o = voltab()
-        .args([
-            "eval",
-            "zh",
-            "--table",
-            cut.to_str().unwrap(),
-            "--emitter",
-            "directional",
-            "--distance",
-            "1",
-            "--sigma-s",
-            "1",
-        ])
-        .output()
-        .unwrap();
+    let o = eval_table(&cut, &["--emitter", "directional", "--distance", "1", "--sigma-s", "1"]);
     assert!(!o.status.success(), "{}", text(&o));
     assert!(!text(&o).contains("panicked"), "{}", text(&o));
     assert!(text(&o).contains("cut.vtab") && text(&o).to_lowercase().contains("truncated"), "{}", text(&o));

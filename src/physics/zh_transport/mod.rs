@@ -174,15 +174,7 @@ pub fn compute_with_progress(
             return Err(format!("{name} = {n} is out of range: valid range is [1, {MAX_NODES_PER_PANEL}]"));
         }
     }
-    if cfg.distances.is_empty() {
-        return Err("distances must not be empty".to_string());
-    }
-    if let Some(bad) = cfg.distances.iter().find(|d| !(d.is_finite() && **d > 0.0)) {
-        return Err(format!("distance {bad} is out of range: distances must be finite and > 0"));
-    }
-    if cfg.distances.windows(2).any(|w| w[0] >= w[1]) {
-        return Err("distances must be strictly increasing".to_string());
-    }
+    validate_distances(&cfg.distances)?;
     let direct = cfg
         .distances
         .iter()
@@ -199,6 +191,23 @@ pub fn compute_with_progress(
         bounce_done();
     }
     Ok(response)
+}
+
+/// Checks a distance axis: non-empty, every value finite and `> 0`, strictly increasing.
+///
+/// # Errors
+/// A message naming the first offending value.
+pub(crate) fn validate_distances(distances: &[f64]) -> Result<(), String> {
+    if distances.is_empty() {
+        return Err("distances must not be empty".to_string());
+    }
+    if let Some(bad) = distances.iter().find(|d| !(d.is_finite() && **d > 0.0)) {
+        return Err(format!("distance {bad} is out of range: distances must be finite and > 0"));
+    }
+    if distances.windows(2).any(|w| w[0] >= w[1]) {
+        return Err("distances must be strictly increasing".to_string());
+    }
+    Ok(())
 }
 
 /// Quantities shared by every distance of a computation.

@@ -204,15 +204,7 @@ pub fn compute(cfg: &AreaConfig) -> Result<AreaResponse, String> {
     if cfg.levels > MAX_LEVELS {
         return Err(format!("levels = {} is out of range: valid range is [0, {MAX_LEVELS}]", cfg.levels));
     }
-    if cfg.distances.is_empty() {
-        return Err("distances must not be empty".to_string());
-    }
-    if let Some(bad) = cfg.distances.iter().find(|d| !(d.is_finite() && **d > 0.0)) {
-        return Err(format!("distance {bad} is out of range: distances must be finite and > 0"));
-    }
-    if cfg.distances.windows(2).any(|w| w[0] >= w[1]) {
-        return Err("distances must be strictly increasing".to_string());
-    }
+    super::validate_distances(&cfg.distances)?;
     if cfg.thetas.is_empty() {
         return Err("thetas must not be empty".to_string());
     }
