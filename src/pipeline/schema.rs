@@ -25,7 +25,7 @@ fn table_kinds() -> Vec<KindDoc> {
         ),
         (
             ZhResponseRaw::KIND,
-            "ZH impulse-response tables (dubouchet2019 Sec. 4-5): per emitter profile and HG g, the ZH coefficients of the incident radiance after each bounce b = 1..B, their sum and the direct term, over distance in mean free paths; one chunk per g. Convention: canonical medium sigma_s = 1, sigma_a = 0; a point emitter has intensity 1 W/sr, a directional emitter delivers 1 W/m^2 at the medium boundary; receiver irradiance E = integral of L(w) max(0, n.w) dw. The direct term of a point emitter is stored as irradiance e^-d/d^2 per unit cosine, never as a lobe.",
+            "ZH impulse-response tables (dubouchet2019 Sec. 4-5): per emitter profile and HG g, the ZH coefficients of the incident radiance after each bounce b = 1..B, their sum and the direct term, over distance in mean free paths; one chunk per g. Convention: canonical medium sigma_s = 1, sigma_a = 0, lengths in mean free paths; a point emitter has intensity 1 W/sr, a directional emitter delivers 1 W/m^2 at the medium boundary (distance = depth below it), a differential-area emitter has intensity max(0, n_e.u) W/sr (axes: distance and the angle theta between n_e and the direction from the patch to the receiver); receiver irradiance E = integral of L(w) max(0, n.w) dw. The direct term of a point emitter is stored as irradiance e^-d/d^2 per unit cosine, never as a lobe. Orders beyond B: the tail arrays (albedo axis).",
             ZhResponseRaw::FIELDS,
             ZhResponse::defaults_json(),
         ),
