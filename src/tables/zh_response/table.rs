@@ -233,6 +233,8 @@ struct Slice {
     tail: Vec<f64>,
     /// Diffusion decay `ν` of the tail population per albedo node (`tail::diffusion`).
     tail_nu: Vec<f64>,
+    /// `ln c_0` of every tail entry `[albedo][d]` (NaN where `c_0 ≤ 0`), computed once at load.
+    tail_log_c0: Vec<f64>,
 }
 
 impl Slice {
@@ -266,7 +268,7 @@ impl Slice {
                 }
             })
             .collect();
-        Self { profile, gi, raw, shape, log_c0, k_low, tail: Vec::new(), tail_nu: Vec::new() }
+        Self { profile, gi, raw, shape, log_c0, k_low, tail: Vec::new(), tail_nu: Vec::new(), tail_log_c0: Vec::new() }
     }
 
     /// Tail `[c_0, c_1]` at albedo node `j` and located distance: `e^{ν d} c_0` geometric in `ln d` where
@@ -297,8 +299,8 @@ impl Slice {
                 let (a, b) = (at(i), at(i + 1));
                 if a[0] > 0.0 && b[0] > 0.0 {
                     let nu = self.tail_nu[j];
-                    let log_c0 =
-                        (1.0 - lambda) * (a[0].ln() + nu * (ds[i] - d)) + lambda * (b[0].ln() + nu * (ds[i + 1] - d));
+                    let (la, lb) = (self.tail_log_c0[j * nd + i], self.tail_log_c0[j * nd + i + 1]);
+                    let log_c0 = (1.0 - lambda) * (la + nu * (ds[i] - d)) + lambda * (lb + nu * (ds[i + 1] - d));
                     let c0 = log_c0.exp();
                     [c0, c0 * ((1.0 - lambda) * a[1] / a[0] + lambda * b[1] / b[0])]
                 } else {
@@ -424,6 +426,16 @@ fn invalid(msg: String) -> QueryError {
 
 fn finite_non_negative(name: &str, v: f64) -> Result<f64, QueryError> {
     if v.is_finite() && v >= 0.0 { Ok(v) } else { Err(invalid(format!("{name} = {v} must be finite and >= 0"))) }
+}
+
+/// `(σ_s, σ_a)` of a medium whose coefficients are finite and ≥ 0 and whose g lies in (−1, 1).
+fn check_medium(medium: &Medium) -> Result<(f64, f64), QueryError> {
+    let sigma_s = finite_non_negative("sigma_s", medium.sigma_s)?;
+    let sigma_a = finite_non_negative("sigma_a", medium.sigma_a)?;
+    if !(medium.g.is_finite() && medium.g.abs() < 1.0) {
+        return Err(invalid(format!("g = {} must lie in (-1, 1)", medium.g)));
+    }
+    Ok((sigma_s, sigma_a))
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -658,12 +670,13 @@ impl ZhResponseTable {
         slice.tail = tail.to_vec();
         if !tail.is_empty() {
             slice.tail_nu = TAIL_ALBEDOS.iter().map(|&a| tail::diffusion(self.g[gi], a).decay).collect();
+            slice.tail_log_c0 = tail.chunks(2).map(|c| if c[0] > 0.0 { c[0].ln() } else { f64::NAN }).collect();
         }
         Ok(slice)
     }
 
-    /// `acc += weight · tail(α, d)` (`[c_0, c_1]`), interpolated in g and in α between [`TAIL_ALBEDOS`]
-    /// nodes (with [`blend`]); nothing when the table has no tail.
+    /// [`Self::accumulate_tail_at`] at distance `d` (tests compare it with `tail::tail_at`).
+    #[cfg(test)]
     #[allow(clippy::too_many_arguments)]
     pub(super) fn accumulate_tail(
         &self,
@@ -674,7 +687,20 @@ impl ZhResponseTable {
         weight: f64,
         acc: &mut [f64; 2],
     ) -> Result<(), QueryError> {
-        let loc = self.locate(d);
+        self.accumulate_tail_at(profile, g, self.locate(d), alpha, weight, acc)
+    }
+
+    /// `acc += weight · tail(α)` (`[c_0, c_1]`) at a located distance, interpolated in g and in α between
+    /// [`TAIL_ALBEDOS`] nodes (with [`blend`]); nothing when the table has no tail.
+    fn accumulate_tail_at(
+        &self,
+        profile: EmitterProfile,
+        g: f64,
+        loc: Loc,
+        alpha: f64,
+        weight: f64,
+        acc: &mut [f64; 2],
+    ) -> Result<(), QueryError> {
         let alpha = alpha.clamp(0.0, 1.0);
         let j = TAIL_ALBEDOS.partition_point(|&a| a <= alpha).clamp(1, TAIL_ALBEDOS.len() - 1) - 1;
         // Interpolation variable √(1 − α): the tail's far field decays like e^{−ν d} with the diffusion
@@ -745,7 +771,8 @@ impl ZhResponseTable {
         }
     }
 
-    /// `acc += weight · Σ_{b ∈ orders} α^b c_b(d)`, interpolated in g.
+    /// [`Self::accumulate_at`] at distance `d` (tests compare it with `Response::zh_at`).
+    #[cfg(test)]
     #[allow(clippy::too_many_arguments)]
     pub(super) fn accumulate(
         &self,
@@ -757,7 +784,22 @@ impl ZhResponseTable {
         weight: f64,
         acc: &mut [f64],
     ) -> Result<(), QueryError> {
-        let loc = self.locate(d);
+        self.accumulate_at(profile, g, self.locate(d), orders, alpha, weight, acc)
+    }
+
+    /// `acc += weight · Σ_{b ∈ orders} α^b c_b` at a located distance, interpolated in g (a query locates
+    /// each distance once and shares it between single, multiple and tail).
+    #[allow(clippy::too_many_arguments)]
+    fn accumulate_at(
+        &self,
+        profile: EmitterProfile,
+        g: f64,
+        loc: Loc,
+        orders: std::ops::RangeInclusive<usize>,
+        alpha: f64,
+        weight: f64,
+        acc: &mut [f64],
+    ) -> Result<(), QueryError> {
         for (gi, w) in self.bracket(g)? {
             if w == 0.0 {
                 continue;
@@ -777,11 +819,7 @@ impl ZhResponseTable {
         opts: &QueryOptions,
         (single, multiple, tail): (&mut [f64], &mut [f64], &mut [f64; 2]),
     ) -> Result<(f64, [f64; 3], [f64; 3]), QueryError> {
-        let sigma_s = finite_non_negative("sigma_s", medium.sigma_s)?;
-        let sigma_a = finite_non_negative("sigma_a", medium.sigma_a)?;
-        if !(medium.g.is_finite() && medium.g.abs() < 1.0) {
-            return Err(invalid(format!("g = {} must lie in (-1, 1)", medium.g)));
-        }
+        let (sigma_s, sigma_a) = check_medium(medium)?;
         let x = finite3("receiver position", receiver.position)?;
         let n = unit("receiver normal", receiver.normal)?;
         let profile = emitter.profile();
@@ -791,7 +829,7 @@ impl ZhResponseTable {
         let sigma_t = sigma_s + sigma_a;
         let shift = if opts.backscatter && sigma_t > 0.0 { self.backscatter_shift / sigma_t } else { 0.0 };
         let max_b = opts.max_bounce.unwrap_or(self.bounces).min(self.bounces);
-        // (direct, strength, true axis, shifted distance, shifted axis)
+        // (direct irradiance, remapped strength, shifted distance, axis from the shifted receiver)
         let (direct, strength, d_s, axis) = match *emitter {
             Emitter::Point { intensity, position } => {
                 let intensity = finite_non_negative("intensity", intensity)?;
@@ -820,7 +858,7 @@ impl ZhResponseTable {
                 let a = unit("toward_light", toward_light)?;
                 let depth = finite_non_negative("depth", depth)?;
                 let direct = e0 * (-sigma_t * depth).exp() * dot(n, a).max(0.0);
-                ((direct), e0, (depth - shift * dot(n, a)).max(0.0), a)
+                (direct, e0, (depth - shift * dot(n, a)).max(0.0), a)
             }
         };
         if !direct.is_finite() {
@@ -830,7 +868,8 @@ impl ZhResponseTable {
         if sigma_s > 0.0 && max_b >= 1 {
             let alpha = sigma_s / sigma_t;
             let scale = strength;
-            self.accumulate(profile, medium.g, sigma_t * d_s, 1..=1, alpha, scale, single)?;
+            let loc = self.locate(sigma_t * d_s);
+            self.accumulate_at(profile, medium.g, loc, 1..=1, alpha, scale, single)?;
             if max_b >= 2 {
                 if opts.similarity {
                     let s2 = (1.0 - medium.g) * sigma_s;
@@ -840,15 +879,16 @@ impl ZhResponseTable {
                         EmitterProfile::Directional => strength,
                     };
                     if s2 > 0.0 {
-                        self.accumulate(profile, 0.0, t2 * d_s, 2..=max_b, s2 / t2, scale2, multiple)?;
+                        let loc2 = self.locate(t2 * d_s);
+                        self.accumulate_at(profile, 0.0, loc2, 2..=max_b, s2 / t2, scale2, multiple)?;
                         if with_tail {
-                            self.accumulate_tail(profile, 0.0, t2 * d_s, s2 / t2, scale2, tail)?;
+                            self.accumulate_tail_at(profile, 0.0, loc2, s2 / t2, scale2, tail)?;
                         }
                     }
                 } else {
-                    self.accumulate(profile, medium.g, sigma_t * d_s, 2..=max_b, alpha, scale, multiple)?;
+                    self.accumulate_at(profile, medium.g, loc, 2..=max_b, alpha, scale, multiple)?;
                     if with_tail {
-                        self.accumulate_tail(profile, medium.g, sigma_t * d_s, alpha, scale, tail)?;
+                        self.accumulate_tail_at(profile, medium.g, loc, alpha, scale, tail)?;
                     }
                 }
             }
@@ -872,11 +912,7 @@ impl ZhResponseTable {
         let Emitter::Area { intensity, position, normal } = *emitter else {
             return Err(invalid("internal: not an area emitter".into()));
         };
-        let sigma_s = finite_non_negative("sigma_s", medium.sigma_s)?;
-        let sigma_a = finite_non_negative("sigma_a", medium.sigma_a)?;
-        if !(medium.g.is_finite() && medium.g.abs() < 1.0) {
-            return Err(invalid(format!("g = {} must lie in (-1, 1)", medium.g)));
-        }
+        let (sigma_s, sigma_a) = check_medium(medium)?;
         let intensity = finite_non_negative("intensity", intensity)?;
         let p = finite3("emitter position", position)?;
         let ne = unit("emitter normal", normal)?;
