@@ -99,7 +99,7 @@ enum Command {
         #[arg(long, default_value = "report")]
         out: PathBuf,
     },
-    /// Timings side by side as ratios: cold vs no-op compile, 1 vs N threads, zstd levels.
+    /// Timings side by side as ratios: cold vs no-op compile, 1 vs N threads, zstd levels, ZH query throughput.
     Bench {
         /// Pipeline file.
         #[arg(default_value = "pipelines/default.ron")]
