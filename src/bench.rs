@@ -69,6 +69,7 @@ fn with_level(def: &TableDef, level: i32) -> TableDef {
         TableDef::ZhResponse(p) => {
             TableDef::ZhResponse(crate::tables::zh_response::ZhResponse { zstd_level: level, ..p.clone() })
         }
+        TableDef::MsLobes(p) => TableDef::MsLobes(crate::tables::ms_lobes::MsLobes { zstd_level: level, ..p.clone() }),
     }
 }
 

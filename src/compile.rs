@@ -162,6 +162,7 @@ fn zstd_level(def: &TableDef) -> i32 {
     match def {
         TableDef::PhaseHg(p) => p.zstd_level,
         TableDef::ZhResponse(p) => p.zstd_level,
+        TableDef::MsLobes(p) => p.zstd_level,
     }
 }
 

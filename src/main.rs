@@ -143,6 +143,39 @@ enum EvalCommand {
     /// Irradiance from a ZhResponse table on a receiver at --distance from the light (point, area) or below
     /// the medium boundary (directional), its normal at --normal-angle from the direction toward the light.
     Zh(EvalZh),
+    /// The stored multiple-scattering lobe of an MsLobes table at (rho, z) around the canonical beam
+    /// (sigma_t = 1, lengths in mean free paths), theta from the axis beam origin -> P (symmetric lobe:
+    /// averaged over the azimuth about that axis).
+    Lobes(EvalLobes),
+}
+
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+struct EvalLobes {
+    /// A compiled MsLobes table (.vtab).
+    #[arg(long)]
+    table: PathBuf,
+    /// Single-scattering albedo in [0, 1].
+    #[arg(long)]
+    albedo: f64,
+    /// HG mean cosine, within the table's g range.
+    #[arg(long, default_value_t = 0.0)]
+    g: f64,
+    /// Distance from the beam axis (mean free paths).
+    #[arg(long)]
+    rho: f64,
+    /// Depth along the beam from its origin (mean free paths; negative behind it).
+    #[arg(long)]
+    z: f64,
+    /// Angle between the outgoing direction and the axis from the beam origin to the point (degrees).
+    #[arg(long)]
+    theta: f64,
+    /// Full-lobe tables: azimuth about that axis from the plane of the beam (degrees, 0 to 180).
+    #[arg(long, default_value_t = 0.0)]
+    phi: f64,
+    /// Print JSON (keys: total, double).
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -242,6 +275,27 @@ fn eval_zh(a: &EvalZh) -> Result<()> {
         println!("single    {:.6e} W/m^2", r.single);
         println!("multiple  {:.6e} W/m^2  (b >= 2, of which tail b > {}: {:.6e})", r.multiple, table.bounces, r.tail);
         println!("total     {:.6e} W/m^2", r.total);
+    }
+    Ok(())
+}
+
+fn eval_lobes(a: &EvalLobes) -> Result<()> {
+    use voltab::tables::ms_lobes::{LobeQuery, MsLobesTable};
+    let table = MsLobesTable::open(&a.table, Some(&[(a.albedo, a.g)])).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let q = LobeQuery {
+        albedo: a.albedo,
+        g: a.g,
+        rho: a.rho,
+        z: a.z,
+        theta: a.theta.to_radians(),
+        phi: a.phi.to_radians(),
+    };
+    let v = table.lobe(&q).map_err(|e| anyhow::anyhow!("{}: {e}", a.table.display()))?;
+    if a.json {
+        println!("{}", serde_json::json!({ "total": v.total, "double": v.double }));
+    } else {
+        println!("total   {:.6e} 1/(mfp sr)  (all paths with >= 2 scattering events)", v.total);
+        println!("double  {:.6e} 1/(mfp sr)  (exactly 2 scattering events)", v.double);
     }
     Ok(())
 }
@@ -408,6 +462,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             }
         }
         Command::Eval { what: EvalCommand::Zh(a) } => eval_zh(&a)?,
+        Command::Eval { what: EvalCommand::Lobes(a) } => eval_lobes(&a)?,
         Command::Stability { all } => {
             let rows = voltab::stability::rows();
             let failed = rows.iter().filter(|r| !r.ok()).count();

@@ -72,5 +72,6 @@ pub fn rows() -> Vec<Row> {
     let mut v = Vec::new();
     v.extend(crate::tables::phase_hg::stability_rows());
     v.extend(crate::tables::zh_response::stability_rows());
+    v.extend(crate::tables::ms_lobes::stability_rows());
     v
 }

@@ -18,7 +18,10 @@ fn no_arguments_runs_the_embedded_default_pipeline() {
     let out = d.path().join("out");
     let tables: Vec<String> =
         common::vtabs(&out).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
-    assert_eq!(tables, ["hg_dubouchet.vtab", "hg_extreme.vtab", "hg_grid.vtab", "zh_dubouchet.vtab"]);
+    assert_eq!(
+        tables,
+        ["hg_dubouchet.vtab", "hg_extreme.vtab", "hg_grid.vtab", "ms_lobes_table2.vtab", "zh_dubouchet.vtab"]
+    );
     for png in ["hg_extreme_plot.png", "hg_grid_plot.png"] {
         let img = image::open(out.join(png)).unwrap();
         assert_eq!((img.width(), img.height()), (1024, 720));

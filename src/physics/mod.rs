@@ -3,6 +3,7 @@
 //! One home per concept: no table kind carries its own copy of a phase function.
 
 pub mod hg;
+pub mod lobe_transport;
 pub mod rng;
 pub mod sh;
 pub mod zh_transport;

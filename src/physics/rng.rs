@@ -30,6 +30,28 @@ impl StreamKey {
         let h = mix(mix(mix(self.table ^ 0x6a09_e667_f3bc_c909) ^ self.cell) ^ sample.rotate_left(17) ^ u64::from(dim));
         (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
+
+    /// The stream of one sample with the key words folded in once: `self.sample(s).uniform(d)` is
+    /// bit-identical to `self.uniform(s, d)` at a third of the cost (for walks that draw many
+    /// dimensions of one sample).
+    #[inline]
+    pub fn sample(&self, sample: u64) -> SampleStream {
+        SampleStream { h: mix(mix(self.table ^ 0x6a09_e667_f3bc_c909) ^ self.cell) ^ sample.rotate_left(17) }
+    }
+}
+
+/// The random numbers of one sample of a [`StreamKey`] (see [`StreamKey::sample`]).
+#[derive(Debug, Clone, Copy)]
+pub struct SampleStream {
+    h: u64,
+}
+
+impl SampleStream {
+    /// Uniform value in [0, 1) for dimension `dim`.
+    #[inline]
+    pub fn uniform(&self, dim: u32) -> f64 {
+        (mix(self.h ^ u64::from(dim)) >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
 }
 
 /// SplitMix64 finaliser: a bijection on u64 with full avalanche.
@@ -77,6 +99,17 @@ mod tests {
         let mean_dims: f64 = (0..n).map(|s| a.uniform(s, 0) * a.uniform(s, 1)).sum::<f64>() / n as f64;
         for m in [mean_cells, mean_samples, mean_dims] {
             assert!((m - 0.25).abs() < 0.0045, "mean product {m}");
+        }
+    }
+
+    #[test]
+    fn sample_stream_equals_uniform() {
+        let k = StreamKey { table: 0xdead_beef, cell: 3 };
+        for s in [0u64, 1, 99, u64::MAX] {
+            let st = k.sample(s);
+            for d in [0u32, 1, 7, 4095] {
+                assert_eq!(st.uniform(d).to_bits(), k.uniform(s, d).to_bits());
+            }
         }
     }
 

@@ -8,6 +8,7 @@ use serde_json::{Value, json};
 use super::params::FieldDoc;
 use super::parse::PipelineFile;
 use crate::stages::plot_phase::{PlotPhase, PlotPhaseRaw};
+use crate::tables::ms_lobes::{MsLobes, MsLobesRaw};
 use crate::tables::phase_hg::{PhaseHg, PhaseHgRaw};
 use crate::tables::zh_response::{ZhResponse, ZhResponseRaw};
 
@@ -28,6 +29,12 @@ fn table_kinds() -> Vec<KindDoc> {
             "ZH impulse-response tables (dubouchet2019 Sec. 4-5): per emitter profile and HG g, the ZH coefficients of the incident radiance after each bounce b = 1..B, their sum and the direct term, over distance in mean free paths; one chunk per g. Convention: canonical medium sigma_s = 1, sigma_a = 0, lengths in mean free paths; a point emitter has intensity 1 W/sr, a directional emitter delivers 1 W/m^2 at the medium boundary (distance = depth below it), a differential-area emitter has intensity max(0, n_e.u) W/sr (axes: distance and the angle theta between n_e and the direction from the patch to the receiver); receiver irradiance E = integral of L(w) max(0, n.w) dw. The direct term of a point emitter is stored as irradiance e^-d/d^2 per unit cosine, never as a lobe. Orders beyond B: the tail arrays (albedo axis).",
             ZhResponseRaw::FIELDS,
             ZhResponse::defaults_json(),
+        ),
+        (
+            MsLobesRaw::KIND,
+            "Multiple-scattering lobe tables (wang2018 Sec. 3.5.4, 4.1, 5.2): per HG g slice and albedo node, the radiance scattered at (rho, z) around a pencil beam toward a lobe direction by photons that had scattered at least once before (all orders >= 2, array total_g<i>[albedo, z, rho, theta(, phi)]), its direction integral (density_g<i>), the exactly-two-events part without its albedo^2 (double[g, ...]) and the fraction of each order's collisions inside the grid (inside[g, k]); one chunk per (g, albedo). Convention: unit-power beam from the origin along +z, sigma_t = 1, lengths in mean free paths, values in 1/(mfp sr) per unit beam power; theta is the angle between the outgoing direction and the axis origin -> P, and the symmetric lobe is the average over the azimuth about that axis (Full adds phi in [0, pi] from the plane of the beam). A medium with extinction sigma_t scales positions by sigma_t and values by sigma_t^3. Defaults: the Table 2 materials' g and channel albedos exactly, a 9-node albedo grid uniform in sqrt(1 - albedo), a 32 x [-16, 48] mfp grid (graded: 96 x 160 cells, finest at the beam start), 33 theta nodes (5.6 degrees, finer than the paper's 18), 2^19 photons per g traced to order 512 (orders beyond: central-limit closure), 10 mantissa bits (below the Monte-Carlo noise).",
+            MsLobesRaw::FIELDS,
+            MsLobes::defaults_json(),
         ),
     ]
 }

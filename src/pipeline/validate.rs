@@ -428,6 +428,7 @@ fn set_preset(d: &mut TableDecl, p: Option<String>) {
     match d {
         TableDecl::PhaseHg(r) => r.preset = p,
         TableDecl::ZhResponse(r) => r.preset = p,
+        TableDecl::MsLobes(r) => r.preset = p,
     }
 }
 

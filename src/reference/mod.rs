@@ -3,5 +3,6 @@
 //! production code in `physics`, and an analog random walk (`walk`) that shares no code with any
 //! table generator.
 
+pub mod beam_adjoint;
 pub mod hg_hp;
 pub mod walk;

@@ -9,6 +9,7 @@
 //! Adding a kind: a module here with a `declare_params!` block, a variant in [`TableDecl`] and
 //! [`TableDef`], and the match arms below.
 
+pub mod ms_lobes;
 pub mod phase_hg;
 pub mod zh_response;
 
@@ -24,6 +25,8 @@ pub enum TableDecl {
     PhaseHg(phase_hg::PhaseHgRaw),
     /// ZH impulse-response tables of dubouchet2019 (per emitter, g, bounce and distance).
     ZhResponse(zh_response::ZhResponseRaw),
+    /// Multiple-scattering lobe tables of wang2018 (per albedo, g, ρ, z and lobe angle).
+    MsLobes(ms_lobes::MsLobesRaw),
 }
 
 /// A resolved table definition: every parameter present. Its canonical RON is hashed into the
@@ -35,6 +38,8 @@ pub enum TableDef {
     PhaseHg(phase_hg::PhaseHg),
     /// See [`zh_response`].
     ZhResponse(zh_response::ZhResponse),
+    /// See [`ms_lobes`].
+    MsLobes(ms_lobes::MsLobes),
 }
 
 /// A problem with one field's value, found by a kind's own validation.
@@ -120,17 +125,20 @@ impl TableDecl {
         match self {
             TableDecl::PhaseHg(_) => phase_hg::PhaseHgRaw::KIND,
             TableDecl::ZhResponse(_) => zh_response::ZhResponseRaw::KIND,
+            TableDecl::MsLobes(_) => ms_lobes::MsLobesRaw::KIND,
         }
     }
 
     /// All kind names, for "did you mean".
-    pub const KINDS: &'static [&'static str] = &[phase_hg::PhaseHgRaw::KIND, zh_response::ZhResponseRaw::KIND];
+    pub const KINDS: &'static [&'static str] =
+        &[phase_hg::PhaseHgRaw::KIND, zh_response::ZhResponseRaw::KIND, ms_lobes::MsLobesRaw::KIND];
 
     /// Field names of this kind (without `id`/`preset`).
     pub fn field_names(&self) -> Vec<&'static str> {
         match self {
             TableDecl::PhaseHg(_) => phase_hg::PhaseHgRaw::FIELDS.iter().map(|f| f.name).collect(),
             TableDecl::ZhResponse(_) => zh_response::ZhResponseRaw::FIELDS.iter().map(|f| f.name).collect(),
+            TableDecl::MsLobes(_) => ms_lobes::MsLobesRaw::FIELDS.iter().map(|f| f.name).collect(),
         }
     }
 
@@ -139,6 +147,7 @@ impl TableDecl {
         match self {
             TableDecl::PhaseHg(r) => r.id.as_deref(),
             TableDecl::ZhResponse(r) => r.id.as_deref(),
+            TableDecl::MsLobes(r) => r.id.as_deref(),
         }
     }
 
@@ -147,6 +156,7 @@ impl TableDecl {
         match self {
             TableDecl::PhaseHg(r) => r.preset.as_deref(),
             TableDecl::ZhResponse(r) => r.preset.as_deref(),
+            TableDecl::MsLobes(r) => r.preset.as_deref(),
         }
     }
 
@@ -155,6 +165,7 @@ impl TableDecl {
         match self {
             TableDecl::PhaseHg(r) => r.set_fields(),
             TableDecl::ZhResponse(r) => r.set_fields(),
+            TableDecl::MsLobes(r) => r.set_fields(),
         }
     }
 
@@ -163,6 +174,7 @@ impl TableDecl {
         match (self, base) {
             (TableDecl::PhaseHg(a), TableDecl::PhaseHg(b)) => Some(TableDecl::PhaseHg(a.merged_over(b))),
             (TableDecl::ZhResponse(a), TableDecl::ZhResponse(b)) => Some(TableDecl::ZhResponse(a.merged_over(b))),
+            (TableDecl::MsLobes(a), TableDecl::MsLobes(b)) => Some(TableDecl::MsLobes(a.merged_over(b))),
             _ => None,
         }
     }
@@ -172,6 +184,7 @@ impl TableDecl {
         match self {
             TableDecl::PhaseHg(r) => TableDef::PhaseHg(r.resolve()),
             TableDecl::ZhResponse(r) => TableDef::ZhResponse(r.resolve()),
+            TableDecl::MsLobes(r) => TableDef::MsLobes(r.resolve()),
         }
     }
 }
@@ -182,6 +195,7 @@ impl TableDef {
         match self {
             TableDef::PhaseHg(_) => phase_hg::PhaseHgRaw::KIND,
             TableDef::ZhResponse(_) => zh_response::ZhResponseRaw::KIND,
+            TableDef::MsLobes(_) => ms_lobes::MsLobesRaw::KIND,
         }
     }
 
@@ -190,6 +204,7 @@ impl TableDef {
         match self {
             TableDef::PhaseHg(_) => phase_hg::KIND_SCHEMA_VERSION,
             TableDef::ZhResponse(_) => zh_response::KIND_SCHEMA_VERSION,
+            TableDef::MsLobes(_) => ms_lobes::KIND_SCHEMA_VERSION,
         }
     }
 
@@ -198,6 +213,7 @@ impl TableDef {
         match self {
             TableDef::PhaseHg(_) => phase_hg::GENERATOR_VERSION,
             TableDef::ZhResponse(_) => zh_response::GENERATOR_VERSION,
+            TableDef::MsLobes(_) => ms_lobes::GENERATOR_VERSION,
         }
     }
 
@@ -206,6 +222,7 @@ impl TableDef {
         match self {
             TableDef::PhaseHg(p) => p.validate(),
             TableDef::ZhResponse(p) => p.validate(),
+            TableDef::MsLobes(p) => p.validate(),
         }
     }
 
@@ -214,6 +231,7 @@ impl TableDef {
         match self {
             TableDef::PhaseHg(p) => p.estimated_bytes(),
             TableDef::ZhResponse(p) => p.estimated_bytes(),
+            TableDef::MsLobes(p) => p.estimated_bytes(),
         }
     }
 
@@ -222,6 +240,7 @@ impl TableDef {
         match self {
             TableDef::PhaseHg(p) => p.work_units(),
             TableDef::ZhResponse(p) => p.work_units(),
+            TableDef::MsLobes(p) => p.work_units(),
         }
     }
 
@@ -237,6 +256,7 @@ impl TableDef {
         match self {
             TableDef::PhaseHg(p) => p.generate(key, progress),
             TableDef::ZhResponse(p) => p.generate(key, progress),
+            TableDef::MsLobes(p) => p.generate(key, progress),
         }
     }
 }
@@ -247,6 +267,7 @@ impl TableDef {
         match self {
             TableDef::PhaseHg(p) => p.estimate_errors(generated, key),
             TableDef::ZhResponse(p) => p.estimate_errors(generated, key),
+            TableDef::MsLobes(p) => p.estimate_errors(generated, key),
         }
     }
 
@@ -257,6 +278,7 @@ impl TableDef {
             TableDef::ZhResponse(p) => {
                 p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::ZhResponse(d))).collect()
             }
+            TableDef::MsLobes(p) => p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::MsLobes(d))).collect(),
         }
     }
 
@@ -267,6 +289,9 @@ impl TableDef {
             TableDef::ZhResponse(_) => {
                 "max relative error of the irradiance on a receiver facing the light vs the random-walk reference"
             }
+            TableDef::MsLobes(_) => {
+                "max relative error of the lobes vs the beam quadrature (E_2) and the backward-walk reference (total)"
+            }
         }
     }
 
@@ -275,6 +300,7 @@ impl TableDef {
         match self {
             TableDef::PhaseHg(p) => p.report_measure(generated),
             TableDef::ZhResponse(p) => p.report_measure(generated),
+            TableDef::MsLobes(p) => p.report_measure(generated),
         }
     }
 }
@@ -284,6 +310,7 @@ pub fn check_known_kind(h: &crate::container::Header) -> Result<(), String> {
     let supported = match h.kind.as_str() {
         k if k == phase_hg::PhaseHgRaw::KIND => phase_hg::KIND_SCHEMA_VERSION,
         k if k == zh_response::ZhResponseRaw::KIND => zh_response::KIND_SCHEMA_VERSION,
+        k if k == ms_lobes::MsLobesRaw::KIND => ms_lobes::KIND_SCHEMA_VERSION,
         other => {
             return Err(format!(
                 "unknown table kind `{other}`: voltab {} reads {}; upgrade voltab to use this table",

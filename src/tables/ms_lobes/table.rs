@@ -1,0 +1,525 @@
+//! The consumer side of `MsLobes` (wang2018 Sec. 3.5.4 Eq. 7, Sec. 4.1): a loaded table (all of it, or
+//! only the (α, g) slices some media need) and the look-ups a translucent-media renderer makes.
+//!
+//! **Input → output.** A `.vtab` and per colour channel a [`MediumChannel`] (albedo, σ_t, g), a beam
+//! (origin, unit direction), a point `x` and a direction `ω` → the radiance scattered at `x` toward `ω`
+//! per unit length per unit beam power by photons that scattered at least once before ([`LobeValue::total`])
+//! and its exactly-two-events part ([`LobeValue::double`]); [`MsLobesTable::lobe`] answers the same in
+//! the canonical medium (σ_t = 1) at cylindrical coordinates (ρ, z) and lobe angles.
+//!
+//! **Interpolation.** g linearly between slices (a g outside the tabulated range is refused, never
+//! extrapolated); albedo linearly in `s = √(1 − α)` (the series `Σ α^k` behaves like `1/s²` globally,
+//! but locally the field varies smoothly in `s`); `(ρ, z)` bilinearly between cell centres in the graded
+//! coordinate (flat between the first centre and the axis / the grid edge); `θ` (and `φ`) linearly.
+//!
+//! **Outside the grid** the value at the nearest grid point is continued with the decay
+//! `(r_b/r) e^{−κ(r − r_b)}`, `κ` the diffusion rate `√(3(1 − α)(1 − αg))` capped at the free-flight
+//! rate 1 ([`crate::physics::lobe_transport::decay_rate`]; the double term uses 1): values always decay
+//! outward, never grow or turn to garbage.
+//!
+//! **Scaling.** A medium with extinction `σ_t` is the canonical one with lengths divided by `σ_t`:
+//! `S(x) = σ_t³ S_canonical(σ_t x)` (densities per unit volume scale as `σ_t³`, the radiance per unit
+//! length as one more `σ_t` than the per-mfp value, the phase is unit-free).
+
+use std::collections::{BTreeSet, HashMap};
+use std::f64::consts::PI;
+use std::path::Path;
+
+use super::{LobeKind, MsLobes, MsLobesRaw};
+use crate::container::{ArrayDesc, ArrayValues};
+use crate::physics::lobe_transport::{GradedAxis, cross, decay_rate, dot};
+use crate::tables::TableDef;
+
+/// Failure to load an `MsLobes` table.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum LobesReadError {
+    /// The container is unreadable.
+    #[error("{}: {source}", path.display())]
+    Container {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: crate::container::ContainerError,
+    },
+    /// The file is a valid container but not an `MsLobes` table this build can use, or the requested
+    /// media are outside it.
+    #[error("{0}")]
+    Layout(String),
+}
+
+/// One colour channel of a homogeneous medium, scene units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MediumChannel {
+    /// Single-scattering albedo in [0, 1].
+    pub albedo: f64,
+    /// Extinction coefficient σ_t = 1/ℓ (1/scene unit), finite, > 0.
+    pub sigma_t: f64,
+    /// HG mean cosine, within the table's g range.
+    pub g: f64,
+}
+
+/// A look-up in the canonical medium (σ_t = 1, lengths in mean free paths).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LobeQuery {
+    /// Albedo in [0, 1].
+    pub albedo: f64,
+    /// HG g within the table's range.
+    pub g: f64,
+    /// Distance from the beam axis, ≥ 0.
+    pub rho: f64,
+    /// Depth along the beam from its origin (negative behind it).
+    pub z: f64,
+    /// Angle between ω and the axis origin → P, in [0, π].
+    pub theta: f64,
+    /// Azimuth of ω about that axis in [0, π] (full-lobe tables; ignored by symmetric ones, which hold
+    /// the azimuthal average).
+    pub phi: f64,
+}
+
+/// The scattered radiance per unit length per unit beam power.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LobeValue {
+    /// All paths with at least two scattering events (`Σ_{k≥2} α^k E_k`).
+    pub total: f64,
+    /// Exactly two scattering events (`α² E_2`), included in `total`.
+    pub double: f64,
+}
+
+/// A loaded `MsLobes` table.
+#[derive(Debug, Clone)]
+pub struct MsLobesTable {
+    gs: Vec<f64>,
+    albedos: Vec<f64>,
+    rho: GradedAxis,
+    z: GradedAxis,
+    theta_bins: usize,
+    phi_nodes: usize,
+    lobe: LobeKind,
+    /// `(g index, albedo index)` → `[z][ρ][θ][φ]`.
+    total: HashMap<(usize, usize), Vec<f64>>,
+    /// `(g index, albedo index)` → `[z][ρ]`.
+    density: HashMap<(usize, usize), Vec<f64>>,
+    /// g index → `E_2` `[z][ρ][θ][φ]`.
+    double: HashMap<usize, Vec<f64>>,
+    /// `[g][k − 1]`.
+    inside: Vec<Vec<f64>>,
+}
+
+/// Interpolation weights of one query point.
+struct Located {
+    r: f64,
+    r_b: f64,
+    spatial: Vec<(usize, f64)>,
+    angular: Vec<(usize, f64)>,
+}
+
+impl Located {
+    /// Weighted sum over the cells and lobe nodes of one slice (`lobe_len` values per cell).
+    fn sample(&self, v: &[f64], lobe_len: usize) -> f64 {
+        let mut acc = 0.0;
+        for &(cell, wc) in &self.spatial {
+            for &(o, wo) in &self.angular {
+                acc += wc * wo * v[cell * lobe_len + o];
+            }
+        }
+        acc
+    }
+
+    /// `(r_b/r) e^{−κ(r − r_b)}` beyond the grid, 1 inside.
+    fn decay(&self, kappa: f64) -> f64 {
+        if self.r > self.r_b && self.r_b > 0.0 {
+            (self.r_b / self.r) * (-kappa * (self.r - self.r_b)).exp()
+        } else {
+            1.0
+        }
+    }
+}
+
+/// Linear interpolation weights over an increasing node list; `None` outside `[first, last]`.
+fn bracket(nodes: &[f64], x: f64) -> Option<[(usize, f64); 2]> {
+    let n = nodes.len();
+    let (first, last) = (*nodes.first()?, *nodes.last()?);
+    let tol = 1e-12 * (1.0 + last.abs().max(first.abs()));
+    if !(x >= first - tol && x <= last + tol) {
+        return None;
+    }
+    if n == 1 {
+        return Some([(0, 1.0), (0, 0.0)]);
+    }
+    let x = x.clamp(first, last);
+    let i = nodes.partition_point(|&v| v <= x).clamp(1, n - 1) - 1;
+    let f = if nodes[i + 1] > nodes[i] { (x - nodes[i]) / (nodes[i + 1] - nodes[i]) } else { 0.0 };
+    Some([(i, 1.0 - f), (i + 1, f)])
+}
+
+/// Albedo interpolation variable.
+fn s_of(albedo: f64) -> f64 {
+    (1.0 - albedo).max(0.0).sqrt()
+}
+
+impl MsLobesTable {
+    /// Loads a table; with `needs` = the (albedo, g) pairs of the media to render, only the slices
+    /// bracketing them are decompressed.
+    pub fn open(path: &Path, needs: Option<&[(f64, f64)]>) -> Result<Self, LobesReadError> {
+        let layout = |m: String| LobesReadError::Layout(format!("{}: {m}", path.display()));
+        let container = |source| LobesReadError::Container { path: path.to_path_buf(), source };
+        let mut r = crate::container::VtabReader::open(path).map_err(container)?;
+        let h = r.header().clone();
+        if h.kind != MsLobesRaw::KIND {
+            return Err(layout(format!("holds a {} table, not MsLobes", h.kind)));
+        }
+        if h.kind_schema_version > super::KIND_SCHEMA_VERSION {
+            return Err(layout(format!(
+                "uses MsLobes layout version {}, this voltab reads up to {}; upgrade voltab",
+                h.kind_schema_version,
+                super::KIND_SCHEMA_VERSION
+            )));
+        }
+        let def = match ron::from_str::<TableDef>(&h.definition_ron) {
+            Ok(TableDef::MsLobes(d)) => d,
+            _ => return Err(layout("its stored definition is not a readable MsLobes definition".into())),
+        };
+        let mut table = Self::from_arrays(&def, &h.arrays, &[]).map_err(layout)?;
+        let mut want: BTreeSet<(usize, usize)> = BTreeSet::new();
+        match needs {
+            None => {
+                for gi in 0..table.gs.len() {
+                    want.extend((0..table.albedos.len()).map(|ai| (gi, ai)));
+                }
+            }
+            Some(list) => {
+                for &(albedo, g) in list {
+                    let (gw, aw) = table.weights(albedo, g).map_err(layout)?;
+                    for (gi, wg) in gw {
+                        for &(ai, wa) in &aw {
+                            if wg > 0.0 && wa > 0.0 {
+                                want.insert((gi, ai));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let index = |name: &str| {
+            h.arrays.iter().position(|a| a.name == name).ok_or_else(|| layout(format!("lacks the {name} array")))
+        };
+        let (di, ii) = (index("double")?, index("inside")?);
+        let gis: BTreeSet<usize> = want.iter().map(|w| w.0).collect();
+        for &gi in &gis {
+            table.double.insert(gi, r.read_slice(di, gi as u64).map_err(container)?.to_f64());
+        }
+        let inside = r.read_array(ii).map_err(container)?.to_f64();
+        let k = def.max_order as usize;
+        table.inside = inside.chunks(k.max(1)).map(<[f64]>::to_vec).collect();
+        for &(gi, ai) in &want {
+            let t = index(&format!("total_g{gi}"))?;
+            let d = index(&format!("density_g{gi}"))?;
+            table.total.insert((gi, ai), r.read_slice(t, ai as u64).map_err(container)?.to_f64());
+            table.density.insert((gi, ai), r.read_slice(d, ai as u64).map_err(container)?.to_f64());
+        }
+        table.check_sizes().map_err(layout)?;
+        Ok(table)
+    }
+
+    /// A table from generated arrays (all slices), or only its layout when `values` is empty.
+    pub fn from_arrays(def: &MsLobes, descs: &[ArrayDesc], values: &[ArrayValues]) -> Result<Self, String> {
+        let want: Vec<String> = def.descs().into_iter().map(|d| d.name).collect();
+        let names: Vec<&str> = descs.iter().map(|d| d.name.as_str()).collect();
+        if names != want {
+            return Err(format!("unexpected MsLobes arrays {names:?}; expected {want:?}"));
+        }
+        for (d, e) in descs.iter().zip(def.descs()) {
+            if d.shape() != e.shape() {
+                return Err(format!("array {} has shape {:?}, expected {:?}", d.name, d.shape(), e.shape()));
+            }
+        }
+        let mut table = MsLobesTable {
+            gs: def.g_values(),
+            albedos: def.albedo_values(),
+            rho: def.rho_axis(),
+            z: def.z_axis(),
+            theta_bins: def.theta_bins as usize,
+            phi_nodes: def.phi_nodes(),
+            lobe: def.lobe,
+            total: HashMap::new(),
+            density: HashMap::new(),
+            double: HashMap::new(),
+            inside: Vec::new(),
+        };
+        if values.is_empty() {
+            return Ok(table);
+        }
+        if values.len() != descs.len() {
+            return Err(format!("{} arrays of values for {} descriptions", values.len(), descs.len()));
+        }
+        let ng = table.gs.len();
+        let na = table.albedos.len();
+        let cells = table.rho.bins * table.z.bins;
+        let lobe_len = cells * table.theta_bins * table.phi_nodes;
+        for gi in 0..ng {
+            let t = values[2 * gi].to_f64();
+            let d = values[2 * gi + 1].to_f64();
+            for ai in 0..na {
+                table.total.insert((gi, ai), t.get(ai * lobe_len..(ai + 1) * lobe_len).unwrap_or(&[]).to_vec());
+                table.density.insert((gi, ai), d.get(ai * cells..(ai + 1) * cells).unwrap_or(&[]).to_vec());
+            }
+        }
+        let double = values[2 * ng].to_f64();
+        for gi in 0..ng {
+            table.double.insert(gi, double.get(gi * lobe_len..(gi + 1) * lobe_len).unwrap_or(&[]).to_vec());
+        }
+        let k = def.max_order as usize;
+        table.inside = values[2 * ng + 1].to_f64().chunks(k.max(1)).map(<[f64]>::to_vec).collect();
+        table.check_sizes()?;
+        Ok(table)
+    }
+
+    fn check_sizes(&self) -> Result<(), String> {
+        let cells = self.rho.bins * self.z.bins;
+        let lobe_len = cells * self.theta_bins * self.phi_nodes;
+        let ok = self.total.values().all(|v| v.len() == lobe_len)
+            && self.double.values().all(|v| v.len() == lobe_len)
+            && self.density.values().all(|v| v.len() == cells);
+        if ok { Ok(()) } else { Err("a slice has the wrong number of values".into()) }
+    }
+
+    /// The g slices.
+    pub fn g_values(&self) -> &[f64] {
+        &self.gs
+    }
+
+    /// The albedo nodes.
+    pub fn albedo_values(&self) -> &[f64] {
+        &self.albedos
+    }
+
+    /// Fraction of the order-`k` collisions inside the grid for g slice `gi` (`k ≥ 1`).
+    pub fn inside_fraction(&self, gi: usize, k: usize) -> Option<f64> {
+        self.inside.get(gi)?.get(k.checked_sub(1)?).copied()
+    }
+
+    /// Number of (g, albedo) slices loaded.
+    pub fn loaded_slices(&self) -> usize {
+        self.total.len()
+    }
+
+    /// Interpolation weights over g slices and albedo nodes.
+    #[allow(clippy::type_complexity)]
+    fn weights(&self, albedo: f64, g: f64) -> Result<(Vec<(usize, f64)>, Vec<(usize, f64)>), String> {
+        if !(0.0..=1.0).contains(&albedo) {
+            return Err(format!("albedo = {albedo} is outside [0, 1]"));
+        }
+        let gw = self.g_weights(g)?;
+        // Nodes in s = √(1 − α) increase as α decreases: bracket on the reversed list.
+        let s_nodes: Vec<f64> = self.albedos.iter().rev().map(|&a| s_of(a)).collect();
+        let n = self.albedos.len();
+        let aw = bracket(&s_nodes, s_of(albedo)).ok_or_else(|| {
+            format!(
+                "albedo = {albedo} is outside the table's albedo range [{}, {}]; add it (albedos or albedo_grid)",
+                self.albedos.first().copied().unwrap_or(f64::NAN),
+                self.albedos.last().copied().unwrap_or(f64::NAN)
+            )
+        })?;
+        Ok((gw, aw.into_iter().map(|(i, w)| (n - 1 - i, w)).collect()))
+    }
+
+    /// Interpolation weights over the g slices.
+    fn g_weights(&self, g: f64) -> Result<Vec<(usize, f64)>, String> {
+        let gw = bracket(&self.gs, g).ok_or_else(|| {
+            format!(
+                "g = {g} is outside the table's g range [{}, {}]; add it to the table's g list",
+                self.gs.first().copied().unwrap_or(f64::NAN),
+                self.gs.last().copied().unwrap_or(f64::NAN)
+            )
+        })?;
+        Ok(gw.into_iter().collect())
+    }
+
+    /// The stored lobes at a canonical point (σ_t = 1): `total` = `Σ_{k≥2} α^k E_k`, `double` = `α² E_2`.
+    pub fn lobe(&self, q: &LobeQuery) -> Result<LobeValue, String> {
+        let (gw, aw) = self.weights(q.albedo, q.g)?;
+        let at = self.locate(q)?;
+        let mut out = LobeValue { total: 0.0, double: q.albedo * q.albedo * self.e2_at(&gw, &at)? };
+        for &(gi, wg) in gw.iter().filter(|w| w.1 > 0.0) {
+            for &(ai, wa) in aw.iter().filter(|w| w.1 > 0.0) {
+                let t = self
+                    .total
+                    .get(&(gi, ai))
+                    .ok_or_else(|| format!("slice (albedo {}, g {}) is not loaded", self.albedos[ai], self.gs[gi]))?;
+                out.total += wg * wa * at.sample(t, self.theta_bins * self.phi_nodes);
+            }
+        }
+        out.total *= at.decay(decay_rate(q.albedo, q.g));
+        // Interpolating in albedo can leave a sliver of double above total when the two nodes differ a
+        // lot; both are non-negative by construction.
+        out.total = out.total.max(0.0);
+        out.double = out.double.max(0.0);
+        Ok(out)
+    }
+
+    /// `E_2` alone (no albedo factor) at a canonical point; `q.albedo` is ignored.
+    pub fn double_lobe(&self, q: &LobeQuery) -> Result<f64, String> {
+        let gw = self.g_weights(q.g)?;
+        let at = self.locate(q)?;
+        self.e2_at(&gw, &at)
+    }
+
+    fn e2_at(&self, gw: &[(usize, f64)], at: &Located) -> Result<f64, String> {
+        let mut acc = 0.0;
+        for &(gi, wg) in gw.iter().filter(|w| w.1 > 0.0) {
+            let e2 = self.double.get(&gi).ok_or_else(|| format!("g slice {} is not loaded", self.gs[gi]))?;
+            acc += wg * at.sample(e2, self.theta_bins * self.phi_nodes);
+        }
+        Ok(acc * at.decay(decay_rate(0.0, 0.0)))
+    }
+
+    /// Checks a query's coordinates and finds its interpolation weights.
+    fn locate(&self, q: &LobeQuery) -> Result<Located, String> {
+        for (name, v) in [("rho", q.rho), ("z", q.z), ("theta", q.theta), ("phi", q.phi), ("albedo", q.albedo)] {
+            if !v.is_finite() {
+                return Err(format!("{name} = {v} is not finite"));
+            }
+        }
+        if q.rho < 0.0 {
+            return Err(format!("rho = {} is negative", q.rho));
+        }
+        if !(0.0..=PI).contains(&q.theta) || !(0.0..=PI).contains(&q.phi) {
+            return Err(format!("theta = {} and phi = {} must lie in [0, π]", q.theta, q.phi));
+        }
+        // Nearest grid point and the outward decay.
+        let rho_b = q.rho.min(self.rho.edge(self.rho.bins));
+        let z_b = q.z.clamp(self.z.edge(0), self.z.edge(self.z.bins));
+        Ok(Located {
+            r: (q.rho * q.rho + q.z * q.z).sqrt(),
+            r_b: (rho_b * rho_b + z_b * z_b).sqrt(),
+            spatial: self.spatial_weights(rho_b, z_b),
+            angular: self.angular_weights(q.theta, q.phi),
+        })
+    }
+
+    /// Bilinear weights over cell centres (flat beyond the first / last centre).
+    fn spatial_weights(&self, rho: f64, z: f64) -> Vec<(usize, f64)> {
+        let axis_w = |axis: &GradedAxis, x: f64| -> [(usize, f64); 2] {
+            let c = (axis.coordinate(x) - 0.5).clamp(0.0, (axis.bins - 1) as f64);
+            let i = (c.floor() as usize).min(axis.bins.saturating_sub(2));
+            let f = (c - i as f64).clamp(0.0, 1.0);
+            if axis.bins == 1 { [(0, 1.0), (0, 0.0)] } else { [(i, 1.0 - f), (i + 1, f)] }
+        };
+        let (wr, wz) = (axis_w(&self.rho, rho), axis_w(&self.z, z));
+        let mut out = Vec::with_capacity(4);
+        for (iz, a) in wz {
+            for (ir, b) in wr {
+                if a * b > 0.0 {
+                    out.push((iz * self.rho.bins + ir, a * b));
+                }
+            }
+        }
+        out
+    }
+
+    /// Linear weights over θ (and φ) nodes, as offsets within a cell's lobe.
+    fn angular_weights(&self, theta: f64, phi: f64) -> Vec<(usize, f64)> {
+        let lin = |x: f64, n: usize| -> [(usize, f64); 2] {
+            let c = (x / PI * (n - 1) as f64).clamp(0.0, (n - 1) as f64);
+            let i = (c.floor() as usize).min(n - 2);
+            let f = c - i as f64;
+            [(i, 1.0 - f), (i + 1, f)]
+        };
+        let wt = lin(theta, self.theta_bins);
+        if self.lobe == LobeKind::Symmetric || self.phi_nodes < 2 {
+            return wt.into_iter().filter(|w| w.1 > 0.0).collect();
+        }
+        let wp = lin(phi, self.phi_nodes);
+        let mut out = Vec::with_capacity(4);
+        for (it, a) in wt {
+            for (ip, b) in wp {
+                if a * b > 0.0 {
+                    out.push((it * self.phi_nodes + ip, a * b));
+                }
+            }
+        }
+        out
+    }
+
+    /// The radiance scattered at `x` toward `omega` per unit length and per unit power of a beam
+    /// leaving `origin` along `direction`, in a medium channel (wang2018 Eq. 7 for one volume sample):
+    /// the canonical lobe at `(σ_t ρ, σ_t z)` times `σ_t³`.
+    pub fn radiance(
+        &self,
+        medium: &MediumChannel,
+        beam: ([f64; 3], [f64; 3]),
+        x: [f64; 3],
+        omega: [f64; 3],
+    ) -> Result<LobeValue, String> {
+        let (origin, direction) = beam;
+        let st = medium.sigma_t;
+        if !(st.is_finite() && st > 0.0) {
+            return Err(format!("sigma_t = {st} must be finite and > 0"));
+        }
+        let unit = |v: [f64; 3], name: &str| -> Result<[f64; 3], String> {
+            let n = dot(v, v).sqrt();
+            if !(n.is_finite() && n > 0.0) {
+                return Err(format!("{name} must be a finite non-zero vector"));
+            }
+            Ok([v[0] / n, v[1] / n, v[2] / n])
+        };
+        let d = unit(direction, "the beam direction")?;
+        let w = unit(omega, "omega")?;
+        let p = [x[0] - origin[0], x[1] - origin[1], x[2] - origin[2]];
+        if !p.iter().all(|c| c.is_finite()) {
+            return Err("the point and the beam origin must be finite".into());
+        }
+        let z = dot(p, d);
+        let perp = [p[0] - z * d[0], p[1] - z * d[1], p[2] - z * d[2]];
+        let rho = dot(perp, perp).sqrt();
+        let r = dot(p, p).sqrt();
+        let (a, e1) = if r > 0.0 {
+            let a = [p[0] / r, p[1] / r, p[2] / r];
+            let e1 = if rho > 0.0 {
+                let rh = [perp[0] / rho, perp[1] / rho, perp[2] / rho];
+                [(z * rh[0] - rho * d[0]) / r, (z * rh[1] - rho * d[1]) / r, (z * rh[2] - rho * d[2]) / r]
+            } else {
+                crate::physics::lobe_transport::lobe_frame([0.0, 0.0, 1.0]).1
+            };
+            (a, e1)
+        } else {
+            (d, [0.0; 3])
+        };
+        let theta = dot(a, w).clamp(-1.0, 1.0).acos();
+        let phi = if self.lobe == LobeKind::Full && dot(e1, e1) > 0.0 {
+            let e2 = cross(a, e1);
+            dot(w, e2).abs().atan2(dot(w, e1))
+        } else {
+            0.0
+        };
+        let q = LobeQuery { albedo: medium.albedo, g: medium.g, rho: st * rho, z: st * z, theta, phi };
+        let v = self.lobe(&q)?;
+        let s3 = st * st * st;
+        let scale = |x: f64| if x == 0.0 { 0.0 } else { x * s3 };
+        let out = LobeValue { total: scale(v.total), double: scale(v.double) };
+        if out.total.is_finite() && out.double.is_finite() {
+            Ok(out)
+        } else {
+            Err(format!("sigma_t = {st} overflows the σ_t³ scaling of the lobe; use scene units nearer 1/σ_t"))
+        }
+    }
+
+    /// The angle-integrated density `Σ_{k≥2} α^k ψ_k` at canonical `(ρ, z)` (interpolated like [`Self::lobe`]).
+    pub fn density(&self, albedo: f64, g: f64, rho: f64, z: f64) -> Result<f64, String> {
+        let (gw, aw) = self.weights(albedo, g)?;
+        let rho_b = rho.min(self.rho.edge(self.rho.bins));
+        let z_b = z.clamp(self.z.edge(0), self.z.edge(self.z.bins));
+        let (r, r_b) = ((rho * rho + z * z).sqrt(), (rho_b * rho_b + z_b * z_b).sqrt());
+        let spatial = self.spatial_weights(rho_b, z_b);
+        let mut acc = 0.0;
+        for &(gi, wg) in gw.iter().filter(|w| w.1 > 0.0) {
+            for &(ai, wa) in aw.iter().filter(|w| w.1 > 0.0) {
+                let v = self.density.get(&(gi, ai)).ok_or("slice not loaded")?;
+                acc += wg * wa * spatial.iter().map(|&(c, w)| w * v[c]).sum::<f64>();
+            }
+        }
+        let decay = if r > r_b && r_b > 0.0 { (r_b / r) * (-decay_rate(albedo, g) * (r - r_b)).exp() } else { 1.0 };
+        Ok(acc * decay)
+    }
+}
