@@ -140,7 +140,9 @@ fn compile_rows(
 fn per_table_rows(p: &ValidatedPipeline, bench: &BenchOptions, rows: &mut Vec<BenchRow>) -> Result<(), BenchError> {
     let limits = Limits::from_machine();
     for table in p.tables().iter().filter(|t| bench.only.is_empty() || bench.only.iter().any(|o| o == t.id())) {
+        let t_gen = Instant::now();
         let generated = table.def().generate(table.key(), &|_| {}).map_err(|e| BenchError::Variant(e.to_string()))?;
+        let generate_ms = ms(t_gen);
         let mut sizes = Vec::new();
         let mut times = Vec::new();
         for level in [3, 9, 19] {
@@ -156,6 +158,9 @@ fn per_table_rows(p: &ValidatedPipeline, bench: &BenchOptions, rows: &mut Vec<Be
         }
         if let TableDef::ZhResponse(def) = table.def() {
             rows.extend(zh_query_rows(table.id(), def, &generated)?);
+        }
+        if let TableDef::MsLobes(def) = table.def() {
+            rows.extend(ms_lobes_rows(table.id(), def, &generated, generate_ms)?);
         }
         for (i, level) in [3, 19].into_iter().enumerate() {
             let k = if i == 0 { 0 } else { 2 };
@@ -240,6 +245,95 @@ fn zh_query_rows(
             candidate_ms: fast,
             speedup: full / fast,
             note: format!("{ZH_QUERIES} queries on 1 thread: {:.2} M/s per core (target >= 5)", per_s / 1e6),
+        });
+    }
+    Ok(rows)
+}
+
+/// wang2018 Table 2: the slowest material's precomputation (Milk, 50 M particles), in ms.
+pub const PAPER_SLOWEST_MATERIAL_MS: f64 = 212_000.0;
+
+/// `MsLobes` rows: the whole table's generation against the paper's slowest single material; the walk's
+/// events per second per core (a 2^16-photon variant on 1 vs N threads); and the symmetric-lobe error
+/// (wang2018 Fig. 8) from a full-lobe variant for BumpySphere at g = 0.7 and 0.9.
+fn ms_lobes_rows(
+    id: &str,
+    def: &crate::tables::ms_lobes::MsLobes,
+    generated: &crate::tables::Generated,
+    generate_ms: f64,
+) -> Result<Vec<BenchRow>, BenchError> {
+    use crate::tables::ms_lobes::{MsLobes, MsLobesTable, symmetry_error};
+    let mut rows = Vec::new();
+    let n_g = def.g_values().len();
+    rows.push(BenchRow {
+        what: format!("lobes {id}: paper's slowest material vs all"),
+        baseline_ms: PAPER_SLOWEST_MATERIAL_MS,
+        candidate_ms: generate_ms,
+        speedup: PAPER_SLOWEST_MATERIAL_MS / generate_ms,
+        note: format!(
+            "baseline = wang2018 Table 2 (Milk, 50 M particles, published); candidate = {} materials, {n_g} g x {} albedos, {} photons/g, {} events",
+            def.materials.len(),
+            def.albedo_values().len(),
+            def.photons,
+            generated.stats.samples
+        ),
+    });
+    let small = MsLobes { photons: 1 << 16, ..def.clone() };
+    let key = [0x5a; 32];
+    let threads = rayon::current_num_threads();
+    let run = |n: usize| -> Result<f64, BenchError> {
+        let pool =
+            rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| BenchError::Variant(e.to_string()))?;
+        let t = Instant::now();
+        pool.install(|| small.generate(&key, &|_| {})).map_err(|e| BenchError::Variant(e.to_string()))?;
+        Ok(ms(t))
+    };
+    let (one, many) = (run(1)?, run(threads)?);
+    let events = small.photons as f64 * f64::from(small.max_order) * n_g as f64;
+    rows.push(BenchRow {
+        what: format!("lobes walk {id}: 1 vs {threads} threads"),
+        baseline_ms: one,
+        candidate_ms: many,
+        speedup: one / many,
+        note: format!(
+            "{:.1} M scattering events/s per core (1 thread, incl. kernel and closure), {:.1} M/s on {threads}",
+            events / one / 1e3,
+            events / many / 1e3
+        ),
+    });
+    for g in [0.7, 0.9] {
+        let full = MsLobes {
+            materials: vec!["BumpySphere".into()],
+            g: vec![g],
+            albedo_grid: 0,
+            albedos: Vec::new(),
+            rho_max: 16.0,
+            z_min: -8.0,
+            z_max: 24.0,
+            rho_bins: 48,
+            z_bins: 80,
+            direction_bins: 32,
+            lobe: crate::tables::ms_lobes::LobeKind::Full,
+            phi_bins: 13,
+            photons: 1 << 18,
+            ..def.clone()
+        };
+        let t = Instant::now();
+        let gen_full = full.generate(&key, &|_| {}).map_err(|e| BenchError::Variant(e.to_string()))?;
+        let full_ms = ms(t);
+        let table =
+            MsLobesTable::from_arrays(&full, &gen_full.arrays, &gen_full.values).map_err(BenchError::Variant)?;
+        let mut note = String::new();
+        for (rho, z) in [(5.0, 5.0), (10.0, 5.0), (5.0, 10.0)] {
+            let (rel, peak) = symmetry_error(&table, 0.9545, g, rho, z).map_err(BenchError::Variant)?;
+            note.push_str(&format!("({rho}, {z}): {:.1} % max, peak {peak:.1} deg off axis; ", 100.0 * rel));
+        }
+        rows.push(BenchRow {
+            what: format!("lobes full vs symmetric, g = {g}"),
+            baseline_ms: full_ms,
+            candidate_ms: full_ms,
+            speedup: 1.0,
+            note: format!("symmetric-lobe error (BumpySphere R, alpha 0.9545) at (rho, z) = {note}"),
         });
     }
     Ok(rows)

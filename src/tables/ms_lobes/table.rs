@@ -299,6 +299,11 @@ impl MsLobesTable {
         self.inside.get(gi)?.get(k.checked_sub(1)?).copied()
     }
 
+    /// Lobe nodes per cell: (θ nodes, φ nodes; 1 for a symmetric table).
+    pub fn lobe_nodes(&self) -> (usize, usize) {
+        (self.theta_bins, self.phi_nodes)
+    }
+
     /// Number of (g, albedo) slices loaded.
     pub fn loaded_slices(&self) -> usize {
         self.total.len()

@@ -70,25 +70,6 @@ fn validation_names_the_field() {
     assert_eq!(fields, ["g", "albedos"]);
 }
 
-/// The cell of `def`'s grid holding `(rho, z)`: its centre and the 3×3 Gauss average of `f(ρ, z)` over
-/// its volume (weight ρ) — what an exact table stores in that cell.
-fn cell_average(def: &MsLobes, rho: f64, z: f64, f: &dyn Fn(f64, f64) -> f64) -> ((f64, f64), f64) {
-    let (ra, za) = (def.rho_axis(), def.z_axis());
-    let (ir, iz) = (ra.cell(rho).unwrap(), za.cell(z).unwrap());
-    let (r0, r1, z0, z1) = (ra.edge(ir), ra.edge(ir + 1), za.edge(iz), za.edge(iz + 1));
-    let gl = crate::physics::sh::gauss_legendre(3);
-    let (mut acc, mut wsum) = (0.0, 0.0);
-    for &(x, wx) in &gl {
-        let r = 0.5 * (r0 + r1) + 0.5 * (r1 - r0) * x;
-        for &(y, wy) in &gl {
-            let zz = 0.5 * (z0 + z1) + 0.5 * (z1 - z0) * y;
-            acc += wx * wy * r * f(r, zz);
-            wsum += wx * wy * r;
-        }
-    }
-    ((ra.center(ir), za.center(iz)), acc / wsum)
-}
-
 /// A coarse grid (cells of ~0.3–0.6 mfp near the probes) with 2^20 photons traced to order 4: enough
 /// second collisions per cell for a ~2 % noise level.
 fn double_def(g: Vec<f64>) -> MsLobes {
@@ -108,7 +89,7 @@ fn double_matches_beam_quadrature() {
         for (rho, z) in [(1.0, 2.0), (2.0, 0.5), (1.5, -1.0), (3.0, 5.0)] {
             for theta in [0.0, 1.0, 2.0, std::f64::consts::PI] {
                 let ((rc, zc), want) =
-                    cell_average(&def, rho, z, &|r, zz| beam_adjoint::double_symmetric(r, zz, theta, g).unwrap());
+                    cell_average(&def, rho, z, &|r, zz| beam_adjoint::double_symmetric(r, zz, theta, g)).unwrap();
                 let q = LobeQuery { albedo: 0.5, g, rho: rc, z: zc, theta, phi: 0.0 };
                 let (x, y) = (a.double_lobe(&q).unwrap(), b.double_lobe(&q).unwrap());
                 let with_albedo = a.lobe(&q).unwrap().double;
@@ -168,8 +149,9 @@ fn full_lobe_matches_pointwise_quadrature() {
             let (st, ct) = (f64::sin(theta), f64::cos(theta));
             let w: [f64; 3] =
                 std::array::from_fn(|i| ct * ax[i] + st * (f64::cos(phi) * e1[i] + f64::sin(phi) * e2[i]));
-            beam_adjoint::e2(p, w, 0.7).unwrap()
-        });
+            beam_adjoint::e2(p, w, 0.7)
+        })
+        .unwrap();
         let q = LobeQuery { albedo: 0.5, g: 0.7, rho: rc, z: zc, theta, phi };
         let (x, y) = (a.double_lobe(&q).unwrap(), b.double_lobe(&q).unwrap());
         let (got, sigma) = (0.5 * (x + y), 0.5 * (x - y).abs());
