@@ -104,3 +104,36 @@ fn report_plots_zh_error_against_time() {
     let img = image::open(out.join("zh-error-vs-time.png")).unwrap();
     assert_eq!((img.width(), img.height()), (1024, 720));
 }
+
+/// The lobe tables' error against run time: photons from 1/64 of the table's count up to it. The E_2
+/// error against the beam quadrature is Monte-Carlo noise, so it falls like 1/√photons (8× over the
+/// ladder); totals are compared with the backward walk (16384 samples, g ≤ 0.7).
+#[test]
+#[ignore = "backward-walk references of 16384 samples; run in release with --ignored (scripts/test-all.sh does)"]
+fn report_plots_lobe_error_against_time() {
+    let d = tempdir();
+    let p = write(
+        d.path(),
+        "lobes.ron",
+        "(tables: [MsLobes(id: \"lobes\", materials: [], g: [0.0, 0.7], albedo_grid: 0, albedos: [0.8], \
+         rho_max: 8.0, z_min: -4.0, z_max: 12.0, rho_bins: 16, z_bins: 24, direction_bins: 32, \
+         photons: 262144, max_order: 128)])",
+    );
+    let out = d.path().join("report");
+    let o = voltab().args(["report", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let rows = r["tables"][0]["rows"].as_array().unwrap();
+    let budgets: Vec<&str> = rows.iter().map(|r| r["budget"].as_str().unwrap()).collect();
+    assert_eq!(budgets, ["photons=4096", "photons=16384", "photons=65536", "photons=262144"]);
+    let curve = |i: usize, name: &str| {
+        rows[i]["errors"].as_array().unwrap().iter().find(|c| c[0] == name).unwrap()[1].as_f64().unwrap()
+    };
+    let (first, last) = (curve(0, "double (E_2) vs quadrature"), curve(3, "double (E_2) vs quadrature"));
+    // 1/√N noise: 8× from the first rung to the last; allow for the worst probe's own fluctuation.
+    assert!(last < first / 3.0 && last < 0.1, "E_2 error {first} → {last}");
+    let total = curve(3, "total vs backward walk");
+    assert!(total < 0.1, "total error at the table's own photon count {total}");
+    let img = image::open(out.join("lobes-error-vs-time.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (1024, 720));
+}

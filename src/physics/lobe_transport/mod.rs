@@ -476,62 +476,81 @@ fn walk(cfg: &LobeConfig, photon: u64, t: &mut Tally) {
 
 /// Histograms → lobes: normalise per photon and cell volume, apply the kernel, add the remainder.
 fn finish(cfg: &LobeConfig, t: &Tally) -> LobeResponse {
+    use rayon::prelude::*;
     let na = cfg.albedos.len();
     let channels = 1 + na;
     let bins = cfg.bins();
     let lobe_len = cfg.lobe_len();
     let k = kernel(cfg);
     let unit = (-f64::from(cfg.scale_bits())).exp2() / cfg.photons as f64;
-    let cells = cfg.cells();
-    let mut double = vec![0.0; cells * lobe_len];
-    let mut total = vec![vec![0.0; cells * lobe_len]; cfg.albedos.len()];
-    let mut density = vec![vec![0.0; cells]; cfg.albedos.len()];
-    let mut rem_density = vec![vec![0.0; cells]; cfg.albedos.len()];
     let iso = 1.0 / (4.0 * PI);
-    let mut h = vec![0.0; bins];
-    for iz in 0..cfg.z.bins {
-        let (z0, z1) = (cfg.z.edge(iz), cfg.z.edge(iz + 1));
-        for ir in 0..cfg.rho.bins {
-            let (r0, r1) = (cfg.rho.edge(ir), cfg.rho.edge(ir + 1));
-            let volume = PI * (r1 * r1 - r0 * r0) * (z1 - z0);
-            let cell = iz * cfg.rho.bins + ir;
-            let (rc, zc) = (cfg.rho.center(ir), cfg.z.center(iz));
-            for ch in 0..channels {
-                let mut sum = 0.0;
-                for (j, hj) in h.iter_mut().enumerate() {
-                    *hj = t.hist[(cell * bins + j) * channels + ch] as f64 * unit / volume;
-                    sum += *hj;
-                }
-                // Channels: albedo nodes in descending order, then E_2.
-                let albedo_index = (ch < na).then(|| na - 1 - ch);
-                let out = match albedo_index {
-                    None => &mut double[cell * lobe_len..(cell + 1) * lobe_len],
-                    Some(ai) => &mut total[ai][cell * lobe_len..(cell + 1) * lobe_len],
-                };
-                for (o, v) in out.iter_mut().enumerate() {
-                    let row = &k[o * bins..(o + 1) * bins];
-                    *v = row.iter().zip(&h).map(|(a, b)| a * b).sum();
-                }
-                if let Some(ai) = albedo_index {
-                    let rem = remainder(cfg.albedos[ai], cfg.g, cfg.max_order, rc, zc);
-                    for v in out.iter_mut() {
-                        *v += rem * iso;
+    let nr = cfg.rho.bins;
+    // One z row per task (each cell is independent; rows are collected in order, so the result does
+    // not depend on the thread count): (E_2 lobes, per albedo: lobes, density, closure density).
+    type Row = (Vec<f64>, Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<Vec<f64>>);
+    let rows: Vec<Row> = (0..cfg.z.bins)
+        .into_par_iter()
+        .map(|iz| {
+            let (z0, z1) = (cfg.z.edge(iz), cfg.z.edge(iz + 1));
+            let mut double = vec![0.0; nr * lobe_len];
+            let mut total = vec![vec![0.0; nr * lobe_len]; na];
+            let mut density = vec![vec![0.0; nr]; na];
+            let mut rem_density = vec![vec![0.0; nr]; na];
+            let mut h = vec![0.0; bins];
+            for ir in 0..nr {
+                let (r0, r1) = (cfg.rho.edge(ir), cfg.rho.edge(ir + 1));
+                let volume = PI * (r1 * r1 - r0 * r0) * (z1 - z0);
+                let cell = iz * nr + ir;
+                let (rc, zc) = (cfg.rho.center(ir), cfg.z.center(iz));
+                for ch in 0..channels {
+                    let mut sum = 0.0;
+                    for (j, hj) in h.iter_mut().enumerate() {
+                        *hj = t.hist[(cell * bins + j) * channels + ch] as f64 * unit / volume;
+                        sum += *hj;
                     }
-                    density[ai][cell] = sum + rem;
-                    rem_density[ai][cell] = rem;
+                    // Channels: albedo nodes in descending order, then E_2.
+                    let albedo_index = (ch < na).then(|| na - 1 - ch);
+                    let out = match albedo_index {
+                        None => &mut double[ir * lobe_len..(ir + 1) * lobe_len],
+                        Some(ai) => &mut total[ai][ir * lobe_len..(ir + 1) * lobe_len],
+                    };
+                    if sum > 0.0 {
+                        for (o, v) in out.iter_mut().enumerate() {
+                            let row = &k[o * bins..(o + 1) * bins];
+                            *v = row.iter().zip(&h).map(|(a, b)| a * b).sum();
+                        }
+                    }
+                    if let Some(ai) = albedo_index {
+                        let rem = remainder(cfg.albedos[ai], cfg.g, cfg.max_order, rc, zc);
+                        for v in out.iter_mut() {
+                            *v += rem * iso;
+                        }
+                        density[ai][ir] = sum + rem;
+                        rem_density[ai][ir] = rem;
+                    }
                 }
             }
-        }
-    }
-    LobeResponse {
-        double,
-        total,
-        density,
-        remainder_density: rem_density,
+            (double, total, density, rem_density)
+        })
+        .collect();
+    let mut out = LobeResponse {
+        double: Vec::with_capacity(cfg.cells() * lobe_len),
+        total: vec![Vec::with_capacity(cfg.cells() * lobe_len); na],
+        density: vec![Vec::with_capacity(cfg.cells()); na],
+        remainder_density: vec![Vec::with_capacity(cfg.cells()); na],
         inside: t.inside.iter().map(|&c| c as f64 / cfg.photons as f64).collect(),
         events: t.events,
         nonfinite_discarded: t.dropped,
+    };
+    for (double, total, density, rem) in rows {
+        out.double.extend(double);
+        for ai in 0..na {
+            out.total[ai].extend_from_slice(&total[ai]);
+            out.density[ai].extend_from_slice(&density[ai]);
+            out.remainder_density[ai].extend_from_slice(&rem[ai]);
+        }
     }
+    out
 }
 
 /// Coordinate of the direction bins, `x(μ') = ½ + ½ sign(μ')(1 − √(1 − |μ'|))` ∈ [0, 1]: linear in μ'
@@ -558,6 +577,7 @@ pub fn theta_node(i: usize, n: usize) -> f64 {
 /// directions `ω'` of histogram bin `b` (both mirror images of its azimuth range), and for the
 /// symmetric lobe over the azimuth of the outgoing `ω_o` about `â` as well. Row-major `[o][b]`.
 pub fn kernel(cfg: &LobeConfig) -> Vec<f64> {
+    use rayon::prelude::*;
     let gl_mu = crate::physics::sh::gauss_legendre(8);
     let nb = cfg.bins();
     let n_phi = cfg.phi_nodes();
@@ -584,22 +604,30 @@ pub fn kernel(cfg: &LobeConfig) -> Vec<f64> {
             // Relative azimuth quadrature: periodic trapezoid on [0, π] (the integrand is even).
             let m = 1024usize;
             let cos_phi: Vec<f64> = (0..=m).map(|q| (PI * q as f64 / m as f64).cos()).collect();
-            for i in 0..cfg.theta_nodes {
-                let th = theta_node(i, cfg.theta_nodes);
-                let (ct, st) = (th.cos(), th.sin());
-                for j in 0..cfg.direction_bins {
-                    let mut acc = 0.0;
-                    for &(mu, w) in &sub[j] {
-                        let s = (1.0 - mu * mu).max(0.0).sqrt();
-                        let mut avg = 0.0;
-                        for (q, c) in cos_phi.iter().enumerate() {
-                            let wq = if q == 0 || q == m { 0.5 } else { 1.0 };
-                            avg += wq * hg::phase(ct * mu + st * s * c, cfg.g);
-                        }
-                        acc += w * avg / m as f64;
-                    }
-                    out[i * nb + j] = acc;
-                }
+            let rows: Vec<Vec<f64>> = (0..cfg.theta_nodes)
+                .into_par_iter()
+                .map(|i| {
+                    let th = theta_node(i, cfg.theta_nodes);
+                    let (ct, st) = (th.cos(), th.sin());
+                    (0..cfg.direction_bins)
+                        .map(|j| {
+                            let mut acc = 0.0;
+                            for &(mu, w) in &sub[j] {
+                                let s = (1.0 - mu * mu).max(0.0).sqrt();
+                                let mut avg = 0.0;
+                                for (q, c) in cos_phi.iter().enumerate() {
+                                    let wq = if q == 0 || q == m { 0.5 } else { 1.0 };
+                                    avg += wq * hg::phase(ct * mu + st * s * c, cfg.g);
+                                }
+                                acc += w * avg / m as f64;
+                            }
+                            acc
+                        })
+                        .collect()
+                })
+                .collect();
+            for (i, row) in rows.into_iter().enumerate() {
+                out[i * nb..i * nb + row.len()].copy_from_slice(&row);
             }
         }
         LobeShape::Full { phi_bins } => {

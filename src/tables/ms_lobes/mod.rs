@@ -356,17 +356,22 @@ impl MsLobes {
         let mut values = Vec::with_capacity(descs.len());
         let (mut double, mut inside) = (Vec::new(), Vec::new());
         let (mut events, mut dropped) = (0u64, 0u64);
-        let mut remainder_share = 0.0f64;
+        // Share of the density the closure contributes, at REMAINDER_POINTS, for the largest albedo node.
+        let mut remainder_share = vec![0.0f64; REMAINDER_POINTS.len()];
+        let (rho_axis, z_axis) = (self.rho_axis(), self.z_axis());
         for (gi, &g) in gs.iter().enumerate() {
             let cfg = self.lobe_config(gi, g, key);
             let r = lobe_transport::compute(&cfg, progress)
                 .map_err(|m| GenerateError::Layout(format!("lobe walk for g = {g}: {m}")))?;
             events += r.events;
             dropped += r.nonfinite_discarded;
-            for (rem, dens) in r.remainder_density.iter().zip(&r.density) {
-                for (a, b) in rem.iter().zip(dens) {
-                    if *b > 0.0 {
-                        remainder_share = remainder_share.max(a / b);
+            if let (Some(rem), Some(dens)) = (r.remainder_density.last(), r.density.last()) {
+                for (share, &(rho, z)) in remainder_share.iter_mut().zip(&REMAINDER_POINTS) {
+                    if let (Some(ir), Some(iz)) = (rho_axis.cell(rho), z_axis.cell(z)) {
+                        let c = iz * rho_axis.bins + ir;
+                        if dens[c] > 0.0 {
+                            *share = share.max(rem[c] / dens[c]);
+                        }
                     }
                 }
             }
@@ -379,18 +384,34 @@ impl MsLobes {
         }
         values.push(to_element(&descs[2 * gs.len()], double, help)?);
         values.push(to_element(&descs[2 * gs.len() + 1], inside, help)?);
-        let errors = vec![ErrorEstimate {
-            name: "remainder_share_max".into(),
-            value: remainder_share,
+        let top = self.albedo_values().last().copied().unwrap_or(0.0);
+        let mut errors: Vec<ErrorEstimate> = REMAINDER_POINTS
+            .iter()
+            .zip(&remainder_share)
+            .map(|(&(rho, z), &v)| ErrorEstimate {
+                name: format!("remainder_share_rho{rho}_z{z}"),
+                value: v,
+                how: format!(
+                    "share of the density at (rho, z) = ({rho}, {z}) mfp contributed by the closure of orders > {} (albedo {top}, largest over the g slices); not an error",
+                    self.max_order
+                ),
+            })
+            .collect();
+        errors.push(ErrorEstimate {
+            name: "remainder_energy_fraction".into(),
+            value: if top > 0.0 { top.powi(self.max_order as i32 - 1) } else { 0.0 },
             how: format!(
-                "largest share of a cell's density (over all g, albedo nodes and cells) that the closure of orders > {} contributes",
+                "albedo {top}: the fraction alpha^(K-1) of all scattering events of order >= 2 that lie beyond K = {} (everywhere, mostly far outside the grid)",
                 self.max_order
             ),
-        }];
+        });
         let stats = GenStats { nonfinite_discarded: dropped, samples: events, errors };
         Ok(Generated { arrays: descs, values, stats })
     }
 }
+
+/// Points `(ρ, z)` at which the sidecar reports the closure's share of the density.
+pub const REMAINDER_POINTS: [(f64, f64); 4] = [(1.0, 2.0), (5.0, 5.0), (10.0, 10.0), (20.0, 20.0)];
 
 /// Probe points `(ρ, z)` of the error estimates, in mean free paths (kept inside the grid).
 pub const PROBES: [(f64, f64); 3] = [(1.0, 2.0), (2.0, 0.5), (1.5, -1.0)];
@@ -617,14 +638,14 @@ impl MsLobes {
             let mut worst = 0.0f64;
             for g in probe_gs(self) {
                 for (rho, z) in probes(self) {
-                    worst = worst.max(symmetry_error(&table, albedo, g, rho, z)?.0);
+                    worst = worst.max(symmetry_error(&table, albedo, g, rho, z)?.1);
                 }
             }
             errors.push(ErrorEstimate {
                 name: "symmetric_lobe_max_rel".into(),
                 value: worst,
                 how: format!(
-                    "largest |L(theta, phi) - azimuthal mean| / lobe maximum: the error a Symmetric table of the same walk makes (wang2018 Fig. 8), {where_}"
+                    "largest integral |L(theta, phi) - azimuthal mean| domega / integral L domega: the error a Symmetric table of the same walk makes (wang2018 Fig. 8), {where_}"
                 ),
             });
         }
@@ -656,16 +677,18 @@ impl MsLobes {
 }
 
 /// The error of the symmetric-lobe approximation (wang2018 Sec. 4.1, Fig. 8) at canonical `(ρ, z)`, from a
-/// `Full` table: the largest `|L(θ, φ) − L̄(θ)|` over the lobe nodes relative to the lobe's maximum, with
-/// `L̄` the azimuthal average (what a symmetric table stores), and the angle of the full lobe's peak from
-/// the symmetry axis (degrees).
-pub fn symmetry_error(table: &MsLobesTable, albedo: f64, g: f64, rho: f64, z: f64) -> Result<(f64, f64), String> {
+/// `Full` table, with `L̄(θ)` the azimuthal average (what a symmetric table stores): (largest
+/// `|L(θ, φ) − L̄(θ)|` over the lobe nodes relative to the lobe's maximum, `∫|L − L̄| dω / ∫ L dω`, angle
+/// of the full lobe's peak from the symmetry axis in degrees).
+pub fn symmetry_error(table: &MsLobesTable, albedo: f64, g: f64, rho: f64, z: f64) -> Result<(f64, f64, f64), String> {
     let (nt, np) = table.lobe_nodes();
     if np < 2 {
         return Err("the symmetric-lobe error needs a Full lobe table".into());
     }
     let node = |i: usize, n: usize| std::f64::consts::PI * i as f64 / (n - 1) as f64;
+    let trapezoid = |i: usize, n: usize| if i == 0 || i == n - 1 { 0.5 } else { 1.0 };
     let mut worst = 0.0f64;
+    let (mut l1_diff, mut l1) = (0.0f64, 0.0f64);
     let (mut peak, mut peak_theta) = (0.0f64, 0.0);
     for i in 0..nt {
         let theta = node(i, nt);
@@ -673,17 +696,19 @@ pub fn symmetry_error(table: &MsLobesTable, albedo: f64, g: f64, rho: f64, z: f6
             .map(|m| table.lobe(&LobeQuery { albedo, g, rho, z, theta, phi: node(m, np) }).map(|v| v.total))
             .collect::<Result<_, _>>()?;
         // Trapezoid over φ ∈ [0, π] of the mirror-symmetric lobe = its average over the circle.
-        let avg = lobe.iter().enumerate().map(|(m, v)| if m == 0 || m == np - 1 { 0.5 * v } else { *v }).sum::<f64>()
-            / (np - 1) as f64;
-        for &v in &lobe {
+        let avg = lobe.iter().enumerate().map(|(m, v)| trapezoid(m, np) * v).sum::<f64>() / (np - 1) as f64;
+        let w_theta = trapezoid(i, nt) * theta.sin();
+        for (m, &v) in lobe.iter().enumerate() {
             worst = worst.max((v - avg).abs());
+            l1_diff += w_theta * trapezoid(m, np) * (v - avg).abs();
+            l1 += w_theta * trapezoid(m, np) * v;
             if v > peak {
                 peak = v;
                 peak_theta = theta;
             }
         }
     }
-    if peak > 0.0 { Ok((worst / peak, peak_theta.to_degrees())) } else { Ok((0.0, 0.0)) }
+    if peak > 0.0 { Ok((worst / peak, l1_diff / l1, peak_theta.to_degrees())) } else { Ok((0.0, 0.0, 0.0)) }
 }
 
 /// Rows of the stability matrix for `MsLobes`: a small table at g ∈ {−0.9, 0, 0.9, 0.99} and albedos
