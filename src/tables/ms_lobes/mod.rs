@@ -453,6 +453,8 @@ fn probe_albedo(def: &MsLobes) -> f64 {
 #[derive(Debug, Clone, Copy, Default)]
 struct Comparison {
     double_rel: f64,
+    /// Fewest second collisions expected in a probe's cell (its E_2 noise is ~1/√hits).
+    double_hits: f64,
     total_rel: f64,
     total_z: f64,
     ref_rel_noise: f64,
@@ -466,7 +468,7 @@ fn compare(
     reference: &dyn Fn(f64, f64, f64, f64, f64) -> Result<AdjointRef, String>,
 ) -> Result<Comparison, String> {
     use crate::reference::beam_adjoint;
-    let mut c = Comparison::default();
+    let mut c = Comparison { double_hits: f64::INFINITY, ..Comparison::default() };
     let albedo = probe_albedo(def);
     for g in probe_gs(def) {
         for (rho, z) in probes(def) {
@@ -478,6 +480,7 @@ fn compare(
                 let got = table.double_lobe(&LobeQuery { albedo, g, rho: rc, z: zc, theta, phi: 0.0 })?;
                 c.double_rel = c.double_rel.max((got - want).abs() / want);
             }
+            c.double_hits = c.double_hits.min(expected_second_collisions(def, table, g, rho, z)?);
             // Totals only where the backward walk's heavy tail is tame (|g| <= 0.7: at g = 0.9 its
             // scores near the beam axis make seeds disagree by 2x).
             if g.abs() > 0.7 {
@@ -492,6 +495,28 @@ fn compare(
         }
     }
     Ok(c)
+}
+
+/// Second collisions the walk is expected to tally in the cell holding `(rho, z)`: `ψ_2 V N`, with `ψ_2`
+/// the table's own `E_2` integrated over directions (trapezoid over its θ nodes).
+fn expected_second_collisions(def: &MsLobes, table: &MsLobesTable, g: f64, rho: f64, z: f64) -> Result<f64, String> {
+    let (ra, za) = (def.rho_axis(), def.z_axis());
+    let (ir, iz) = match (ra.cell(rho), za.cell(z)) {
+        (Some(a), Some(b)) => (a, b),
+        _ => return Err(format!("({rho}, {z}) is outside the grid")),
+    };
+    let (r0, r1) = (ra.edge(ir), ra.edge(ir + 1));
+    let volume = std::f64::consts::PI * (r1 * r1 - r0 * r0) * (za.edge(iz + 1) - za.edge(iz));
+    let n = def.theta_bins as usize;
+    let h = std::f64::consts::PI / (n - 1) as f64;
+    let mut psi = 0.0;
+    for i in 0..n {
+        let theta = h * i as f64;
+        let w = if i == 0 || i == n - 1 { 0.5 } else { 1.0 };
+        let q = LobeQuery { albedo: 0.5, g, rho: ra.center(ir), z: za.center(iz), theta, phi: 0.0 };
+        psi += w * h * 2.0 * std::f64::consts::PI * theta.sin() * table.double_lobe(&q)?;
+    }
+    Ok(psi * volume * def.photons as f64)
 }
 
 /// The cell of `def`'s grid holding `(rho, z)`: its centre and the 3×3 Gauss average of `f(ρ, z)` over
@@ -589,6 +614,11 @@ impl MsLobes {
                 how: format!(
                     "E_2 lobes at theta 0, pi/2, pi at the centres of the probes' cells vs the cell average of reference::beam_adjoint::double_symmetric (Monte-Carlo noise included), {where_}"
                 ),
+            },
+            ErrorEstimate {
+                name: "double_probe_min_second_collisions".into(),
+                value: c.double_hits,
+                how: "fewest second collisions the walk tallied (expected) in a probe's cell: the E_2 comparison's noise is ~1/sqrt of it (not an error)".into(),
             },
             ErrorEstimate {
                 name: "total_max_rel_vs_backward_walk".into(),
