@@ -6,25 +6,20 @@ mod common;
 
 use std::sync::OnceLock;
 
-use common::{tempdir, text, voltab, write};
+use common::{tempdir, text, voltab};
 use voltab::tables::ms_lobes::{LobeQuery, MsLobesTable};
 
 /// A small table compiled once through the binary: (kept temp dir, table path).
 fn compiled() -> &'static (tempfile::TempDir, std::path::PathBuf) {
     static T: OnceLock<(tempfile::TempDir, std::path::PathBuf)> = OnceLock::new();
     T.get_or_init(|| {
-        let d = tempdir();
-        let p = write(
-            d.path(),
+        common::compile_pipeline(
             "lobes.ron",
             "(tables: [MsLobes(id: \"lobes\", materials: [\"Skin\"], g: [0.9], albedo_grid: 3, rho_max: 8.0, \
              z_min: -4.0, z_max: 12.0, rho_bins: 16, z_bins: 24, theta_bins: 17, direction_bins: 16, \
              photons: 16384, max_order: 64)])",
-        );
-        let out = d.path().join("out");
-        let o = voltab().args(["compile", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
-        assert!(o.status.success(), "{}", text(&o));
-        (d, out.join("lobes.vtab"))
+            "lobes",
+        )
     })
 }
 

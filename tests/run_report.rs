@@ -66,6 +66,18 @@ fn report_writes_json_markdown_and_a_plot_with_converging_errors() {
     assert_eq!((img.width(), img.height()), (1024, 720));
 }
 
+/// Runs `voltab report` on a one-table pipeline; returns the temp dir, the report folder and the rows.
+fn report_rows(name: &str, pipeline: &str) -> (tempfile::TempDir, std::path::PathBuf, Vec<serde_json::Value>) {
+    let d = tempdir();
+    let p = write(d.path(), name, pipeline);
+    let out = d.path().join("report");
+    let o = voltab().args(["report", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let rows = r["tables"][0]["rows"].as_array().unwrap().clone();
+    (d, out, rows)
+}
+
 /// The ZH tables' error against run time: the ladder from 1/16 of the table's distance resolution and
 /// quadrature size up to the table's own converges toward the random walk. Walk references of 2^20
 /// photons make this slow in the dev profile, so it runs in release with the other opt-in end-to-end
@@ -73,17 +85,10 @@ fn report_writes_json_markdown_and_a_plot_with_converging_errors() {
 #[test]
 #[ignore = "walk references of 2^20 photons; run in release with --ignored (scripts/test-all.sh does)"]
 fn report_plots_zh_error_against_time() {
-    let d = tempdir();
-    let p = write(
-        d.path(),
+    let (_d, out, rows) = report_rows(
         "zh.ron",
         "(tables: [ZhResponse(id: \"zh\", g: [0.0], emitters: [Point, Directional], bounces: 4, distance_bins: 64, quadrature_nodes: 8)])",
     );
-    let out = d.path().join("report");
-    let o = voltab().args(["report", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
-    assert!(o.status.success(), "{}", text(&o));
-    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
-    let rows = r["tables"][0]["rows"].as_array().unwrap();
     let budgets: Vec<&str> = rows.iter().map(|r| r["budget"].as_str().unwrap()).collect();
     assert_eq!(
         budgets,
@@ -111,19 +116,12 @@ fn report_plots_zh_error_against_time() {
 #[test]
 #[ignore = "backward-walk references of 16384 samples; run in release with --ignored (scripts/test-all.sh does)"]
 fn report_plots_lobe_error_against_time() {
-    let d = tempdir();
-    let p = write(
-        d.path(),
+    let (_d, out, rows) = report_rows(
         "lobes.ron",
         "(tables: [MsLobes(id: \"lobes\", materials: [], g: [0.0, 0.7], albedo_grid: 0, albedos: [0.8], \
          rho_max: 8.0, z_min: -4.0, z_max: 12.0, rho_bins: 16, z_bins: 24, direction_bins: 32, \
          photons: 262144, max_order: 128)])",
     );
-    let out = d.path().join("report");
-    let o = voltab().args(["report", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
-    assert!(o.status.success(), "{}", text(&o));
-    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
-    let rows = r["tables"][0]["rows"].as_array().unwrap();
     let budgets: Vec<&str> = rows.iter().map(|r| r["budget"].as_str().unwrap()).collect();
     assert_eq!(budgets, ["photons=4096", "photons=16384", "photons=65536", "photons=262144"]);
     let curve = |i: usize, name: &str| {

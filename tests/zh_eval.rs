@@ -5,23 +5,18 @@ mod common;
 
 use std::sync::OnceLock;
 
-use common::{tempdir, text, voltab, write};
+use common::{tempdir, text, voltab};
 use voltab::tables::zh_response::{Emitter, Medium, QueryOptions, Receiver, ZhResponseTable};
 
 /// A small table compiled once through the binary: (kept temp dir, table path).
 fn compiled() -> &'static (tempfile::TempDir, std::path::PathBuf) {
     static T: OnceLock<(tempfile::TempDir, std::path::PathBuf)> = OnceLock::new();
     T.get_or_init(|| {
-        let d = tempdir();
-        let p = write(
-            d.path(),
+        common::compile_pipeline(
             "zh.ron",
             "(tables: [ZhResponse(id: \"zh\", g: [-0.5, 0.0, 0.5], bounces: 4, distance_bins: 24, quadrature_nodes: 4), PhaseHg(id: \"hg\", g: [0.0])])",
-        );
-        let out = d.path().join("out");
-        let o = voltab().args(["compile", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
-        assert!(o.status.success(), "{}", text(&o));
-        (d, out.join("zh.vtab"))
+            "zh",
+        )
     })
 }
 

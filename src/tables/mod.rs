@@ -305,6 +305,49 @@ impl TableDef {
     }
 }
 
+/// Failure to load a table for a consumer (every kind's reader).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TableReadError {
+    /// The container is unreadable.
+    #[error("{}: {source}", path.display())]
+    Container {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: crate::container::ContainerError,
+    },
+    /// The file is a valid container but not a table of the kind this build can use, or the requested
+    /// slices are outside it.
+    #[error("{0}")]
+    Layout(String),
+}
+
+/// The common start of every kind's reader: opens `path`, checks that it holds a `kind` table whose
+/// layout version this build reads (`supported`), and parses its stored definition (the caller matches
+/// the variant it expects). Errors go through the caller's `container` and `layout` constructors.
+pub fn open_kind<E>(
+    path: &std::path::Path,
+    (kind, supported): (&str, u32),
+    container: impl Fn(crate::container::ContainerError) -> E,
+    layout: impl Fn(String) -> E,
+) -> Result<(crate::container::VtabReader, TableDef), E> {
+    let r = crate::container::VtabReader::open(path).map_err(container)?;
+    let h = r.header();
+    if h.kind != kind {
+        return Err(layout(format!("holds a {} table, not {kind}", h.kind)));
+    }
+    if h.kind_schema_version > supported {
+        return Err(layout(format!(
+            "uses {kind} layout version {}, this voltab reads up to {supported}; upgrade voltab",
+            h.kind_schema_version
+        )));
+    }
+    let def = ron::from_str::<TableDef>(&h.definition_ron)
+        .map_err(|_| layout(format!("its stored definition is not a readable {kind} definition")))?;
+    Ok((r, def))
+}
+
 /// Checks that a table's kind and layout version are ones this build can consume.
 pub fn check_known_kind(h: &crate::container::Header) -> Result<(), String> {
     let supported = match h.kind.as_str() {

@@ -34,6 +34,17 @@ pub fn text(o: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
 
+/// Compiles `pipeline` (written as `file` in a fresh temp folder) through the binary and returns the
+/// kept folder and the path of table `id`.
+pub fn compile_pipeline(file: &str, pipeline: &str, id: &str) -> (tempfile::TempDir, PathBuf) {
+    let d = tempdir();
+    let p = write(d.path(), file, pipeline);
+    let out = d.path().join("out");
+    let o = voltab().args(["compile", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    (d, out.join(format!("{id}.vtab")))
+}
+
 /// The repository root.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

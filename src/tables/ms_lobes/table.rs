@@ -31,22 +31,7 @@ use crate::physics::lobe_transport::{GradedAxis, cross, decay_rate, dot};
 use crate::tables::TableDef;
 
 /// Failure to load an `MsLobes` table.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum LobesReadError {
-    /// The container is unreadable.
-    #[error("{}: {source}", path.display())]
-    Container {
-        /// The file.
-        path: std::path::PathBuf,
-        /// Why.
-        source: crate::container::ContainerError,
-    },
-    /// The file is a valid container but not an `MsLobes` table this build can use, or the requested
-    /// media are outside it.
-    #[error("{0}")]
-    Layout(String),
-}
+pub type LobesReadError = crate::tables::TableReadError;
 
 /// One colour channel of a homogeneous medium, scene units.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -164,22 +149,12 @@ impl MsLobesTable {
     pub fn open(path: &Path, needs: Option<&[(f64, f64)]>) -> Result<Self, LobesReadError> {
         let layout = |m: String| LobesReadError::Layout(format!("{}: {m}", path.display()));
         let container = |source| LobesReadError::Container { path: path.to_path_buf(), source };
-        let mut r = crate::container::VtabReader::open(path).map_err(container)?;
-        let h = r.header().clone();
-        if h.kind != MsLobesRaw::KIND {
-            return Err(layout(format!("holds a {} table, not MsLobes", h.kind)));
-        }
-        if h.kind_schema_version > super::KIND_SCHEMA_VERSION {
-            return Err(layout(format!(
-                "uses MsLobes layout version {}, this voltab reads up to {}; upgrade voltab",
-                h.kind_schema_version,
-                super::KIND_SCHEMA_VERSION
-            )));
-        }
-        let def = match ron::from_str::<TableDef>(&h.definition_ron) {
-            Ok(TableDef::MsLobes(d)) => d,
-            _ => return Err(layout("its stored definition is not a readable MsLobes definition".into())),
+        let (mut r, def) =
+            crate::tables::open_kind(path, (MsLobesRaw::KIND, super::KIND_SCHEMA_VERSION), container, layout)?;
+        let TableDef::MsLobes(def) = def else {
+            return Err(layout("its stored definition is not a readable MsLobes definition".into()));
         };
+        let h = r.header().clone();
         let mut table = Self::from_arrays(&def, &h.arrays, &[]).map_err(layout)?;
         let mut want: BTreeSet<(usize, usize)> = BTreeSet::new();
         match needs {

@@ -60,21 +60,7 @@ pub fn array_names(def: &ZhResponse) -> Vec<String> {
 }
 
 /// Failure to load a `ZhResponse` table.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum ZhReadError {
-    /// The container is unreadable.
-    #[error("{}: {source}", path.display())]
-    Container {
-        /// The file.
-        path: std::path::PathBuf,
-        /// Why.
-        source: crate::container::ContainerError,
-    },
-    /// The file is a valid container but not a `ZhResponse` table this build can use.
-    #[error("{0}")]
-    Layout(String),
-}
+pub type ZhReadError = crate::tables::TableReadError;
 
 /// A query the table cannot answer.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -467,22 +453,12 @@ impl ZhResponseTable {
     ) -> Result<Self, ZhReadError> {
         let layout = |m: String| ZhReadError::Layout(format!("{}: {m}", path.display()));
         let container = |source| ZhReadError::Container { path: path.to_path_buf(), source };
-        let mut r = crate::container::VtabReader::open(path).map_err(container)?;
-        let h = r.header().clone();
-        if h.kind != ZhResponseRaw::KIND {
-            return Err(layout(format!("holds a {} table, not ZhResponse", h.kind)));
-        }
-        if h.kind_schema_version > super::KIND_SCHEMA_VERSION {
-            return Err(layout(format!(
-                "uses ZhResponse layout version {}, this voltab reads up to {}; upgrade voltab",
-                h.kind_schema_version,
-                super::KIND_SCHEMA_VERSION
-            )));
-        }
-        let def = match ron::from_str::<TableDef>(&h.definition_ron) {
-            Ok(TableDef::ZhResponse(d)) => d,
-            _ => return Err(layout("its stored definition is not a readable ZhResponse definition".into())),
+        let (mut r, def) =
+            crate::tables::open_kind(path, (ZhResponseRaw::KIND, super::KIND_SCHEMA_VERSION), container, layout)?;
+        let TableDef::ZhResponse(def) = def else {
+            return Err(layout("its stored definition is not a readable ZhResponse definition".into()));
         };
+        let h = r.header().clone();
         let mut table = Self::from_arrays(&def, &h.arrays, &[]).map_err(layout)?;
         let profiles: Vec<EmitterProfile> = match emitters {
             None => table.emitters.clone(),
