@@ -99,17 +99,7 @@ fn azimuthal(a: f64, b: f64) -> f64 {
 
 /// Order-1 irradiance from a point source at distance `d` (cosine `cos_nl` between normal and `l`).
 fn point_single(sigma_s: f64, sigma_t: f64, g: f64, intensity: f64, d: f64, cos_nl: f64) -> f64 {
-    let sin_nl = (1.0 - cos_nl * cos_nl).max(0.0).sqrt();
-    let outer = |psi: f64| {
-        let c = azimuthal(cos_nl * psi.cos(), sin_nl * psi.sin());
-        if c == 0.0 {
-            return 0.0;
-        }
-        let (t0, b) = (d * psi.cos(), d * psi.sin());
-        let inner = |alpha: f64| phase(g, -alpha.sin()) * (-sigma_t * (t0 + b * (FRAC_PI_4 + 0.5 * alpha).tan())).exp();
-        c * integrate(&inner, -t0.atan2(b), FRAC_PI_2, 1e-9)
-    };
-    sigma_s * intensity / d * integrate(&outer, 0.0, PI, 1e-8)
+    emitter_single(sigma_s, sigma_t, g, intensity, d, cos_nl, None)
 }
 
 /// Order-1 irradiance from an area emitter at distance `d` whose normal is `−l` (`facing = true`, it
@@ -117,6 +107,11 @@ fn point_single(sigma_s: f64, sigma_t: f64, g: f64, intensity: f64, d: f64, cos_
 /// direction from the source to the scattering point is `v` with `l·v = sin(α − ψ)`, so the factor is
 /// `max(0, ∓sin(α − ψ))` and the `α` range is split at `α = ψ` where it vanishes.
 fn area_single(sigma_s: f64, sigma_t: f64, g: f64, intensity: f64, d: f64, cos_nl: f64, facing: bool) -> f64 {
+    emitter_single(sigma_s, sigma_t, g, intensity, d, cos_nl, Some(facing))
+}
+
+/// The quadrature behind [`point_single`] (`area = None`) and [`area_single`] (`Some(facing)`).
+fn emitter_single(sigma_s: f64, sigma_t: f64, g: f64, intensity: f64, d: f64, cos_nl: f64, area: Option<bool>) -> f64 {
     let sin_nl = (1.0 - cos_nl * cos_nl).max(0.0).sqrt();
     let outer = |psi: f64| {
         let c = azimuthal(cos_nl * psi.cos(), sin_nl * psi.sin());
@@ -125,11 +120,19 @@ fn area_single(sigma_s: f64, sigma_t: f64, g: f64, intensity: f64, d: f64, cos_n
         }
         let (t0, b) = (d * psi.cos(), d * psi.sin());
         let inner = |alpha: f64| {
-            let emission = if facing { (psi - alpha).sin() } else { (alpha - psi).sin() };
-            phase(g, -alpha.sin()) * (-sigma_t * (t0 + b * (FRAC_PI_4 + 0.5 * alpha).tan())).exp() * emission.max(0.0)
+            let emission = match area {
+                None => 1.0,
+                Some(true) => (psi - alpha).sin().max(0.0),
+                Some(false) => (alpha - psi).sin().max(0.0),
+            };
+            phase(g, -alpha.sin()) * (-sigma_t * (t0 + b * (FRAC_PI_4 + 0.5 * alpha).tan())).exp() * emission
         };
         let lo = -t0.atan2(b);
-        let (a, z) = if facing { (lo, psi.min(FRAC_PI_2)) } else { (psi.max(lo), FRAC_PI_2) };
+        let (a, z) = match area {
+            None => (lo, FRAC_PI_2),
+            Some(true) => (lo, psi.min(FRAC_PI_2)),
+            Some(false) => (psi.max(lo), FRAC_PI_2),
+        };
         c * integrate(&inner, a, z, 1e-9)
     };
     sigma_s * intensity / d * integrate(&outer, 0.0, PI, 1e-8)
