@@ -76,6 +76,8 @@ pub struct LobeValue {
 pub struct MsLobesTable {
     gs: Vec<f64>,
     albedos: Vec<f64>,
+    /// `√(1 − α)` of the albedo nodes in reverse order (increasing), the albedo interpolation axis.
+    s_nodes: Vec<f64>,
     rho: GradedAxis,
     z: GradedAxis,
     theta_bins: usize,
@@ -212,6 +214,7 @@ impl MsLobesTable {
         let mut table = MsLobesTable {
             gs: def.g_values(),
             albedos: def.albedo_values(),
+            s_nodes: def.albedo_values().iter().rev().map(|&a| s_of(a)).collect(),
             rho: def.rho_axis(),
             z: def.z_axis(),
             theta_bins: def.theta_bins as usize,
@@ -292,9 +295,8 @@ impl MsLobesTable {
         }
         let gw = self.g_weights(g)?;
         // Nodes in s = √(1 − α) increase as α decreases: bracket on the reversed list.
-        let s_nodes: Vec<f64> = self.albedos.iter().rev().map(|&a| s_of(a)).collect();
         let n = self.albedos.len();
-        let aw = bracket(&s_nodes, s_of(albedo)).ok_or_else(|| {
+        let aw = bracket(&self.s_nodes, s_of(albedo)).ok_or_else(|| {
             format!(
                 "albedo = {albedo} is outside the table's albedo range [{}, {}]; add it (albedos or albedo_grid)",
                 self.albedos.first().copied().unwrap_or(f64::NAN),
