@@ -50,7 +50,7 @@ use crate::physics::rng::StreamKey;
 /// Version of the array layout below.
 pub const KIND_SCHEMA_VERSION: u32 = 1;
 /// Version of the numerics; bump when values change so caches rebuild.
-pub const GENERATOR_VERSION: &str = "ms_lobes/1";
+pub const GENERATOR_VERSION: &str = "ms_lobes/2";
 
 /// Most g slices (each needs its own walk).
 pub const MAX_G: usize = 32;
@@ -113,6 +113,10 @@ crate::declare_params! {
         mantissa_bits: u8 = 10, unit = "bits", range = "0 (lossless), or 1 to 23 for F32, 1 to 52 for F64";
         /// zstd compression level.
         zstd_level: i32 = 9, unit = "", range = "1 to 19";
+        /// Random seed: another value draws an independent table (e.g. to measure the Monte-Carlo noise).
+        /// Each g slice's photons depend only on the seed and the slice's own walk parameters, so a table
+        /// pruned to fewer g slices or albedo nodes holds exactly the same numbers for the slices it keeps.
+        seed: u64 = 0, unit = "", range = "any";
     }
 }
 
@@ -271,6 +275,22 @@ impl MsLobes {
         self.photons * self.g_values().len() as u64
     }
 
+    /// The random stream of the g slice `g`: keyed by the parameters its walk depends on (the seed, g,
+    /// photons, orders, grid, lobe shape), not by the other slices, the albedo nodes or the encoding.
+    pub fn slice_stream(&self, g: f64) -> StreamKey {
+        let one = MsLobes {
+            materials: Vec::new(),
+            g: vec![g],
+            albedo_grid: 0,
+            albedos: Vec::new(),
+            element: Element::F64,
+            mantissa_bits: 0,
+            zstd_level: 1,
+            ..self.clone()
+        };
+        StreamKey::from_content_key(&crate::cache::content_key(&super::TableDef::MsLobes(one)), 0)
+    }
+
     /// The generator configuration of g slice `gi`.
     pub fn lobe_config(&self, gi: usize, g: f64, key: &[u8; 32]) -> LobeConfig {
         LobeConfig {
@@ -360,7 +380,8 @@ impl MsLobes {
         let mut remainder_share = vec![0.0f64; REMAINDER_POINTS.len()];
         let (rho_axis, z_axis) = (self.rho_axis(), self.z_axis());
         for (gi, &g) in gs.iter().enumerate() {
-            let cfg = self.lobe_config(gi, g, key);
+            let mut cfg = self.lobe_config(gi, g, key);
+            cfg.stream = self.slice_stream(g);
             let r = lobe_transport::compute(&cfg, progress)
                 .map_err(|m| GenerateError::Layout(format!("lobe walk for g = {g}: {m}")))?;
             events += r.events;

@@ -23,8 +23,9 @@ fn small_def(g: Vec<f64>, albedos: Vec<f64>) -> MsLobes {
     }
 }
 
-fn build(def: &MsLobes, key: u8) -> (Generated, MsLobesTable) {
-    let g = def.generate(&[key; 32], &|_| {}).unwrap();
+fn build(def: &MsLobes, seed: u8) -> (Generated, MsLobesTable) {
+    let def = &MsLobes { seed: u64::from(seed), ..def.clone() };
+    let g = def.generate(&[seed; 32], &|_| {}).unwrap();
     let t = MsLobesTable::from_arrays(def, &g.arrays, &g.values).unwrap();
     (g, t)
 }
