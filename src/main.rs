@@ -1,5 +1,6 @@
 //! The `voltab` command line. The only place that uses `anyhow`; everything else returns typed
-//! errors. `voltab` with no arguments runs `pipelines/default.ron` into `out/`.
+//! errors. `voltab` with no arguments runs `pipelines/default.ron` into `out/`, pruned to what the
+//! bundled scenes (`scenes/*.gltf`) need when run from a checkout.
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -38,6 +39,9 @@ enum Command {
         /// Print the summary as JSON on stdout.
         #[arg(long)]
         json: bool,
+        /// Compile only what these scenes need (glTF or USD; see `voltab plan`).
+        #[arg(long, num_args = 1..)]
+        scene: Vec<PathBuf>,
     },
     /// Compile tables (incrementally: unchanged tables are not recomputed).
     Compile {
@@ -53,6 +57,30 @@ enum Command {
         #[arg(long)]
         jobs: Option<usize>,
         /// Print the summary as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        /// Compile only the tables and slices these scenes need (glTF or USD; see `voltab plan`).
+        #[arg(long, num_args = 1..)]
+        scene: Vec<PathBuf>,
+    },
+    /// Print what voltab imported from a glTF or USD scene: counts, bounds, lights in voltab's units,
+    /// media, cameras, materials and warnings.
+    Scene {
+        /// Scene file (.gltf, .glb, .usd, .usda, .usdc, .usdz).
+        file: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// For each table and slice of a pipeline, whether the scenes need it ("compile" or "skip", with the
+    /// reason).
+    Plan {
+        /// Pipeline file.
+        pipeline: PathBuf,
+        /// Scene files (the plan covers what any of them needs).
+        #[arg(long, num_args = 1.., required = true)]
+        scene: Vec<PathBuf>,
+        /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
     },
@@ -324,17 +352,61 @@ fn load(path: &Path) -> Result<ValidatedPipeline> {
     pipeline::load_and_validate(path, sources).map_err(|e| anyhow::anyhow!("{e}"))
 }
 
+/// The bundled scenes (`scenes/*.gltf`, sorted) when run from a checkout: the main job compiles what they
+/// need. Outside a checkout there are none and the whole default pipeline is compiled.
+fn bundled_scenes() -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir("scenes")
+        .map(|d| {
+            d.flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|e| e == "gltf")).collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    if !v.is_empty() {
+        let names: Vec<String> = v.iter().map(|p| p.display().to_string()).collect();
+        eprintln!("note: compiling what the bundled scenes need: {}", names.join(", "));
+    }
+    v
+}
+
+/// Imports a scene; its warnings go to stderr.
+fn load_scene(path: &Path) -> Result<voltab::scene::Scene> {
+    // Scene errors are complete messages (file, node/prim, fix).
+    voltab::scene::Scene::load(path).map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+/// The pipeline pruned to what `scenes` need (unchanged when there are none); the plan goes to stderr.
+fn planned(p: ValidatedPipeline, scenes: &[PathBuf], quiet: bool) -> Result<ValidatedPipeline> {
+    if scenes.is_empty() {
+        return Ok(p);
+    }
+    let loaded = scenes.iter().map(|f| load_scene(f)).collect::<Result<Vec<_>>>()?;
+    for s in &loaded {
+        for w in &s.warnings {
+            eprintln!("warning: {}: {}: {}\n  help: {}", s.source.display(), w.location, w.message, w.help);
+        }
+    }
+    let plan = voltab::plan::Plan::new(&p, &loaded);
+    if !quiet {
+        eprint!("{}", plan.text());
+    }
+    if plan.has_missing() {
+        eprintln!("warning: the scenes need slices this pipeline does not declare (MISSING above)");
+    }
+    plan.pruned_pipeline(&p, &pipeline::Limits::from_machine()).map_err(|e| anyhow::anyhow!("{}: {e}", p.path().display()))
+}
+
 fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
     let progress = std::io::stderr().is_terminal();
-    let cmd = cmd.unwrap_or(Command::Run {
+    let cmd = cmd.unwrap_or_else(|| Command::Run {
         pipeline: "pipelines/default.ron".into(),
         out: "out".into(),
         jobs: None,
         json: false,
+        scene: bundled_scenes(),
     });
     match cmd {
-        Command::Run { pipeline, out, jobs, json } => {
-            let p = load(&pipeline)?;
+        Command::Run { pipeline, out, jobs, json, scene } => {
+            let p = planned(load(&pipeline)?, &scene, json)?;
             let summary = compile(&p, &CompileOptions { out_dir: out.clone(), only: Vec::new(), jobs, progress })?;
             let mut stage_results = Vec::new();
             for s in p.stages() {
@@ -361,8 +433,8 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 );
             }
         }
-        Command::Compile { pipeline, out, only, jobs, json } => {
-            let p = load(&pipeline)?;
+        Command::Compile { pipeline, out, only, jobs, json, scene } => {
+            let p = planned(load(&pipeline)?, &scene, json)?;
             let summary = compile(&p, &CompileOptions { out_dir: out.clone(), only, jobs, progress })?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -374,6 +446,25 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                     println!("{}", summary_line(t));
                 }
                 println!("{} tables in {:.0} ms → {}", summary.tables.len(), summary.total_ms, out.display());
+            }
+        }
+        Command::Scene { file, json } => {
+            let scene = load_scene(&file)?;
+            let summary = voltab::scene::summary::SceneSummary::of(&scene);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                print!("{}", summary.text());
+            }
+        }
+        Command::Plan { pipeline, scene, json } => {
+            let p = load(&pipeline)?;
+            let scenes = scene.iter().map(|f| load_scene(f)).collect::<Result<Vec<_>>>()?;
+            let plan = voltab::plan::Plan::new(&p, &scenes);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&plan)?);
+            } else {
+                print!("{}", plan.text());
             }
         }
         Command::Check { pipeline, dump_json } => {
@@ -481,6 +572,10 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                     format!("{}\n", serde_json::to_string_pretty(&pipeline::schema::json_schema())?),
                 ),
                 ("reference.md", pipeline::schema::reference_markdown()),
+                (
+                    "VOLTAB_participating_media.schema.json",
+                    format!("{}\n", serde_json::to_string_pretty(&voltab::scene::gltf_import::vendor_schema())?),
+                ),
             ];
             let mut stale = Vec::new();
             for (name, text) in &files {

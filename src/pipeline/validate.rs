@@ -81,6 +81,13 @@ impl ValidatedStage {
     pub fn def(&self) -> &StageDef {
         &self.def
     }
+    /// The same stage with another definition, revalidated.
+    pub fn with_def(&self, def: StageDef) -> Result<Self, String> {
+        if let Some(i) = def.validate().first() {
+            return Err(format!("{}: {}", i.message, i.help));
+        }
+        Ok(Self { id: self.id.clone(), def })
+    }
 }
 
 /// A whole pipeline that passed validation.
@@ -112,6 +119,11 @@ impl ValidatedPipeline {
     /// A pipeline of the given tables only (used by `voltab report` for its quality ladders).
     pub fn with_tables(&self, tables: Vec<ValidatedTable>) -> Self {
         Self { path: self.path.clone(), tables, stages: Vec::new() }
+    }
+
+    /// A pipeline of the given tables and stages (used by the scene planner for pruned pipelines).
+    pub fn with_parts(&self, tables: Vec<ValidatedTable>, stages: Vec<ValidatedStage>) -> Self {
+        Self { path: self.path.clone(), tables, stages }
     }
 }
 

@@ -1,0 +1,1 @@
+//! Placeholder until the BVH lands (replaced in this change).
