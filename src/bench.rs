@@ -4,6 +4,8 @@
 //!
 //! Input: a validated pipeline. Output: a text table on stdout (and the same rows as JSON with
 //! `--json`): cold compile vs no-op recompile, 1 vs N worker threads, and zstd levels 3/9/19 per table.
+//! [`ray_rows`] adds the ray-query benchmark (BVH build and rays/s, 1 vs N threads) on a procedural
+//! scene; it needs no pipeline.
 
 use std::time::Instant;
 
@@ -376,6 +378,145 @@ fn lobe_l1_difference(
         }
     }
     Ok(if norm > 0.0 { diff / norm } else { 0.0 })
+}
+
+/// Default triangle budget of [`ray_rows`] (2²⁰).
+pub const RAY_BENCH_TRIANGLES: usize = 1 << 20;
+
+/// Image size (square) of the primary rays in [`ray_rows`]; the incoherent set has as many rays.
+pub const RAY_BENCH_IMAGE: usize = 1024;
+
+/// Ray-query benchmark on [`crate::scene::bvh::procedural::sphere_field`] with at least `triangles`
+/// triangles: the BVH build, then closest hits for primary-like coherent rays (a pinhole camera's
+/// pixels in scan-line order) and incoherent rays (origins uniform in the scene bounds, directions
+/// uniform on the sphere), and shadow rays (from the primary hits to a point light above the scene),
+/// each on 1 thread vs all threads of the global rayon pool: medians of 3 runs, alternating between
+/// the two pools so that both see the same machine load.
+pub fn ray_rows(triangles: usize) -> Result<Vec<BenchRow>, BenchError> {
+    use crate::scene::bvh::{Ray, SceneBvh, procedural};
+    let scene = procedural::sphere_field(triangles);
+    let threads = rayon::current_num_threads();
+    let pool = |n: usize| {
+        rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| BenchError::Variant(e.to_string()))
+    };
+    let (one, all) = (pool(1)?, pool(threads)?);
+    let mut rows = Vec::new();
+
+    let (build_one, build_all, _) = interleaved(&one, &all, &|| (SceneBvh::build(&scene).stats().build_ms, 0));
+    let bvh = all.install(|| SceneBvh::build(&scene));
+    let stats = bvh.stats();
+    rows.push(BenchRow {
+        what: format!("bvh build: 1 vs {threads} threads"),
+        baseline_ms: build_one,
+        candidate_ms: build_all,
+        speedup: build_one / build_all,
+        note: format!(
+            "{} triangles ({} meshes), {} CWBVH nodes; {:.1} M triangles/s on {threads}",
+            stats.triangles,
+            scene.meshes.len(),
+            stats.nodes,
+            stats.triangles as f64 / build_all / 1e3
+        ),
+    });
+
+    let Some((lo, hi)) = scene.bounds() else { return Ok(rows) };
+    let center = [0, 1, 2].map(|c| 0.5 * (lo[c] + hi[c]));
+    let size = [0, 1, 2].map(|c| hi[c] - lo[c]);
+    let n = RAY_BENCH_IMAGE;
+    // A camera above one edge of the field looking at its centre, 60° vertical field of view.
+    let eye = [center[0], hi[1] + 0.35 * size[0], lo[2] - 0.15 * size[2]];
+    let fwd = unit([0, 1, 2].map(|c| center[c] - eye[c]));
+    let right = unit(cross(fwd, [0.0, 1.0, 0.0]));
+    let up = cross(right, fwd);
+    let tan = (30f64).to_radians().tan();
+    let primary: Vec<Ray> = (0..n * n)
+        .map(|i| {
+            let (x, y) = ((i % n) as f64 + 0.5, (i / n) as f64 + 0.5);
+            let (sx, sy) = ((2.0 * x / n as f64 - 1.0) * tan, (1.0 - 2.0 * y / n as f64) * tan);
+            Ray::new(eye, [0, 1, 2].map(|c| fwd[c] + sx * right[c] + sy * up[c]))
+        })
+        .collect();
+    let key = crate::physics::rng::StreamKey { table: 0x7a7e_5eed, cell: 1 };
+    let incoherent: Vec<Ray> = (0..(n * n) as u64)
+        .map(|i| {
+            let s = key.sample(i);
+            let o = [0, 1, 2].map(|c| lo[c] + size[c] * s.uniform(c as u32));
+            let z = 2.0 * s.uniform(3) - 1.0;
+            let phi = std::f64::consts::TAU * s.uniform(4);
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            Ray::new(o, [r * phi.cos(), z, r * phi.sin()])
+        })
+        .collect();
+    let hits = all.install(|| bvh.closest_hits(&primary));
+    let light = [center[0] + 0.2 * size[0], hi[1] + 0.5 * size[0], center[2] - 0.1 * size[2]];
+    let eps = 1e-4 * size.iter().fold(1.0f64, |m, &x| m.max(x));
+    let shadow: Vec<Ray> = hits
+        .iter()
+        .zip(&primary)
+        .filter_map(|(h, r)| {
+            let h = h.as_ref()?;
+            // Offset the start along the normal, on the side the ray came from.
+            let side = if h.front_face { 1.0 } else { -1.0 };
+            let p = [0, 1, 2].map(|c| r.origin[c] + h.t * r.direction[c] + side * eps * h.geometric_normal[c]);
+            Some(Ray { origin: p, direction: [0, 1, 2].map(|c| light[c] - p[c]), t_min: 0.0, t_max: 1.0 })
+        })
+        .collect();
+
+    let closest = |rays: &[Ray]| bvh.closest_hits(rays).iter().filter(|h| h.is_some()).count();
+    let cases: [(&str, &[Ray], bool); 3] =
+        [("primary (coherent)", &primary, false), ("incoherent", &incoherent, false), ("shadow", &shadow, true)];
+    for (name, rays, is_shadow) in cases {
+        let run = || {
+            let t = Instant::now();
+            let n = if is_shadow { bvh.occluded_batch(rays).iter().filter(|&&b| b).count() } else { closest(rays) };
+            (ms(t), n)
+        };
+        let (t_one, t_all, count) = interleaved(&one, &all, &run);
+        let mrays = |t: f64| rays.len() as f64 / t / 1e3;
+        rows.push(BenchRow {
+            what: format!("rays {name}: 1 vs {threads} threads"),
+            baseline_ms: t_one,
+            candidate_ms: t_all,
+            speedup: t_one / t_all,
+            note: format!(
+                "{} rays, {:.1} % {}; {:.2} Mrays/s on 1 thread, {:.2} Mrays/s on {threads}",
+                rays.len(),
+                100.0 * count as f64 / rays.len().max(1) as f64,
+                if is_shadow { "occluded" } else { "hit" },
+                mrays(t_one),
+                mrays(t_all)
+            ),
+        });
+    }
+    Ok(rows)
+}
+
+/// Medians of 3 runs of `f` (returning ms and a count) on each pool, alternating between the pools so
+/// that both see the same machine load; the count of the last run.
+fn interleaved(
+    one: &rayon::ThreadPool,
+    all: &rayon::ThreadPool,
+    f: &(dyn Fn() -> (f64, usize) + Sync),
+) -> (f64, f64, usize) {
+    let (mut a, mut b, mut count) = (Vec::new(), Vec::new(), 0);
+    for _ in 0..3 {
+        a.push(one.install(f).0);
+        let (t, n) = all.install(f);
+        b.push(t);
+        count = n;
+    }
+    a.sort_by(f64::total_cmp);
+    b.sort_by(f64::total_cmp);
+    (a[1], b[1], count)
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+fn unit(v: [f64; 3]) -> [f64; 3] {
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|x| x / l)
 }
 
 /// The rows as a text table.

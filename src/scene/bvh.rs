@@ -1,1 +1,0 @@
-//! Placeholder until the BVH lands (replaced in this change).
