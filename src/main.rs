@@ -142,6 +142,13 @@ enum Command {
         /// the pipeline three times; keep the per-table rows (zstd levels, ZH query throughput).
         #[arg(long)]
         tables_only: bool,
+        /// Also benchmark ray queries (BVH build; primary, incoherent and shadow rays; 1 vs N threads) on a
+        /// procedural scene of at least TRIANGLES triangles (default 1048576).
+        #[arg(long, value_name = "TRIANGLES", num_args = 0..=1, default_missing_value = "1048576")]
+        rays: Option<usize>,
+        /// Only the ray benchmark (no pipeline tables).
+        #[arg(long)]
+        rays_only: bool,
     },
     /// Evaluate a compiled table at one configuration.
     Eval {
@@ -356,9 +363,7 @@ fn load(path: &Path) -> Result<ValidatedPipeline> {
 /// need. Outside a checkout there are none and the whole default pipeline is compiled.
 fn bundled_scenes() -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir("scenes")
-        .map(|d| {
-            d.flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|e| e == "gltf")).collect()
-        })
+        .map(|d| d.flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|e| e == "gltf")).collect())
         .unwrap_or_default();
     v.sort();
     if !v.is_empty() {
@@ -392,7 +397,8 @@ fn planned(p: ValidatedPipeline, scenes: &[PathBuf], quiet: bool) -> Result<Vali
     if plan.has_missing() {
         eprintln!("warning: the scenes need slices this pipeline does not declare (MISSING above)");
     }
-    plan.pruned_pipeline(&p, &pipeline::Limits::from_machine()).map_err(|e| anyhow::anyhow!("{}: {e}", p.path().display()))
+    plan.pruned_pipeline(&p, &pipeline::Limits::from_machine())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", p.path().display()))
 }
 
 fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
@@ -543,9 +549,15 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             print!("{}", voltab::report::markdown(&r));
             println!("wrote {}/report.json, report.md and {} plots", out.display(), r.tables.len());
         }
-        Command::Bench { pipeline, json, only, tables_only } => {
-            let p = load(&pipeline)?;
-            let rows = voltab::bench::run(&p, &voltab::bench::BenchOptions { only, tables_only })?;
+        Command::Bench { pipeline, json, only, tables_only, rays, rays_only } => {
+            let mut rows = Vec::new();
+            if !rays_only {
+                let p = load(&pipeline)?;
+                rows = voltab::bench::run(&p, &voltab::bench::BenchOptions { only, tables_only })?;
+            }
+            if rays.is_some() || rays_only {
+                rows.extend(voltab::bench::ray_rows(rays.unwrap_or(voltab::bench::RAY_BENCH_TRIANGLES))?);
+            }
             if json {
                 println!("{}", serde_json::to_string_pretty(&rows)?);
             } else {

@@ -111,7 +111,7 @@ pub struct MediumNeed {
     pub g: [f64; 3],
     /// Single-scattering albedo per channel.
     pub albedo: [f64; 3],
-    /// Largest extinction anywhere in the scene bounds [1/m] (density included).
+    /// Largest extinction anywhere in the scene bounds \[1/m\] (density included).
     pub sigma_t_max: f64,
     /// `sigma_t_max ×` the scene diagonal: the most mean free paths a query can span.
     pub optical_extent: f64,
@@ -273,8 +273,9 @@ fn fill(keep: &mut [bool]) {
     }
 }
 
+/// `"= x"` for one value, `"∈ [lo, hi]"` for a range.
 fn fmt_range((lo, hi): (f64, f64)) -> String {
-    if lo == hi { format!("{lo}") } else { format!("[{lo}, {hi}]") }
+    if lo == hi { format!("= {lo}") } else { format!("∈ [{lo}, {hi}]") }
 }
 
 fn slice_items(name: &str, nodes: &[f64], keep: &[bool], why_keep: &str, why_skip: &str) -> Vec<Item> {
@@ -291,6 +292,9 @@ fn slice_items(name: &str, nodes: &[f64], keep: &[bool], why_keep: &str, why_ski
 
 fn missing_items(name: &str, outside: &[f64], nodes: &[f64], field: &str) -> Vec<Item> {
     let (lo, hi) = (nodes.first().copied().unwrap_or(0.0), nodes.last().copied().unwrap_or(0.0));
+    let mut outside = outside.to_vec();
+    outside.sort_by(f64::total_cmp);
+    outside.dedup();
     outside
         .iter()
         .map(|v| Item {
@@ -340,16 +344,42 @@ fn plan_phase_hg(t: &ValidatedTable, d: &PhaseHg, needs: &Needs) -> TablePlan {
         "g",
         &nodes,
         &keep,
-        &format!("brackets the scene media's g ∈ {r}"),
-        &format!("unused: scene media have g ∈ {r}"),
+        &format!("brackets the scene media's g {r}"),
+        &format!("unused: scene media have g {r}"),
     );
     items.extend(missing_items("g", &outside, &nodes, "g"));
     let kept: Vec<f64> = nodes.iter().zip(&keep).filter(|(_, k)| **k).map(|(v, _)| *v).collect();
     if kept.is_empty() {
-        return TablePlan { items, ..skipped(t, format!("no g slice brackets the scene media's g ∈ {r}")) };
+        return TablePlan { items, ..skipped(t, format!("no g slice brackets the scene media's g {r}")) };
     }
     let def = TableDef::PhaseHg(PhaseHg { g: GValues::List(kept.clone()), ..d.clone() });
-    compiled(t, format!("{} of {} g slices: scene media have g ∈ {r}", kept.len(), nodes.len()), items, def)
+    compiled(t, format!("{} of {} g slices: scene media have g {r}", kept.len(), nodes.len()), items, def)
+}
+
+/// A g a `PhaseHg` table lacks is only missing when no other `PhaseHg` table of the pipeline spans it
+/// (tables such as `hg_dubouchet` serve one consumer's narrower range).
+fn covered_elsewhere(p: &ValidatedPipeline, mut tables: Vec<TablePlan>) -> Vec<TablePlan> {
+    let spans: Vec<(String, f64, f64)> = p
+        .tables()
+        .iter()
+        .filter_map(|t| match t.def() {
+            TableDef::PhaseHg(d) => {
+                let v = d.g.values();
+                Some((t.id().to_string(), *v.first()?, *v.last()?))
+            }
+            _ => None,
+        })
+        .collect();
+    for t in tables.iter_mut().filter(|t| t.kind == "PhaseHg") {
+        for item in t.items.iter_mut().filter(|i| i.decision == Decision::Missing) {
+            let Some(g) = item.what.strip_prefix("g = ").and_then(|v| v.parse::<f64>().ok()) else { continue };
+            if let Some((id, _, _)) = spans.iter().find(|(id, lo, hi)| *id != t.id && *lo <= g && g <= *hi) {
+                item.decision = Decision::Skip;
+                item.reason = format!("outside this table's g range; table {id} covers it");
+            }
+        }
+    }
+    tables
 }
 
 /// The trimmed distance axis: `(distance_max, distance_bins)` keeping the full axis's nodes up to the
@@ -400,7 +430,11 @@ fn plan_zh(t: &ValidatedTable, d: &ZhResponse, needs: &Needs) -> TablePlan {
             items.push(Item {
                 what: format!("emitter {profile:?}"),
                 decision,
-                reason: if decision == Decision::Missing { format!("{why}: add {profile:?} to `emitters`") } else { why },
+                reason: if decision == Decision::Missing {
+                    format!("{why}: add {profile:?} to `emitters`")
+                } else {
+                    why
+                },
             });
         }
     }
@@ -416,13 +450,13 @@ fn plan_zh(t: &ValidatedTable, d: &ZhResponse, needs: &Needs) -> TablePlan {
         "g",
         &nodes,
         &keep,
-        &format!("brackets the fog's g ∈ {r}"),
-        &format!("unused: fog media have g ∈ {r}"),
+        &format!("brackets the fog's g {r}"),
+        &format!("unused: fog media have g {r}"),
     ));
     items.extend(missing_items("g", &outside, &nodes, "g"));
     let kept: Vec<f64> = nodes.iter().zip(&keep).filter(|(_, k)| **k).map(|(v, _)| *v).collect();
     if kept.is_empty() {
-        return TablePlan { items, ..skipped(t, format!("no g slice brackets the fog's g ∈ {r}")) };
+        return TablePlan { items, ..skipped(t, format!("no g slice brackets the fog's g {r}")) };
     }
     let extent = needs.fog.iter().map(|m| m.optical_extent).fold(0.0, f64::max);
     let mut def = ZhResponse { emitters, g: GValues::List(kept.clone()), ..d.clone() };
@@ -479,8 +513,8 @@ fn plan_ms_lobes(t: &ValidatedTable, d: &MsLobes, needs: &Needs) -> TablePlan {
         "g",
         &g_nodes,
         &keep_g,
-        &format!("brackets the translucent media's g ∈ {r}"),
-        &format!("unused: translucent media have g ∈ {r}"),
+        &format!("brackets the translucent media's g {r}"),
+        &format!("unused: translucent media have g {r}"),
     ));
     items.extend(missing_items("g", &outside_g, &g_nodes, "g"));
     let a_nodes = d.albedo_values();
@@ -491,8 +525,8 @@ fn plan_ms_lobes(t: &ValidatedTable, d: &MsLobes, needs: &Needs) -> TablePlan {
         "albedo",
         &a_nodes,
         &keep_a,
-        &format!("brackets a translucent channel albedo (∈ {ra})"),
-        &format!("unused: translucent channel albedos are {ra}"),
+        &format!("brackets a translucent channel albedo ({ra})"),
+        &format!("unused: translucent channel albedos {ra}"),
     ));
     items.extend(missing_items("albedo", &outside_a, &a_nodes, "albedos"));
     let kept = |nodes: &[f64], keep: &[bool]| -> Vec<f64> {
@@ -524,6 +558,7 @@ impl Plan {
                 TableDef::MsLobes(d) => plan_ms_lobes(t, d, &needs),
             })
             .collect();
+        let tables = covered_elsewhere(p, tables);
         let stages = p
             .stages()
             .iter()
@@ -578,7 +613,9 @@ impl Plan {
         let mut tables = Vec::new();
         for tp in &self.tables {
             let (Some(def), Some(t)) = (&tp.def, p.table(&tp.id)) else { continue };
-            tables.push(t.with_def(def.clone(), limits).map_err(|e| format!("table \"{}\": pruned definition: {e}", tp.id))?);
+            tables.push(
+                t.with_def(def.clone(), limits).map_err(|e| format!("table \"{}\": pruned definition: {e}", tp.id))?,
+            );
         }
         let mut stages: Vec<ValidatedStage> = Vec::new();
         for sp in &self.stages {

@@ -73,6 +73,13 @@ fn a_translucent_object_needs_lobes_but_no_volume_to_surface_tables() {
     assert_eq!(zh.decision, Decision::Skip);
     assert!(zh.reason.contains("refractive objects"), "{}", zh.reason);
     assert_eq!(kept_g(&plan, "ms_lobes_table2"), vec![0.7]);
+    // hg_dubouchet stops at g = 0.5, but hg_grid spans 0.7: not missing.
+    let hd = item(table(&plan, "hg_dubouchet"), "g = 0.7");
+    assert_eq!(
+        (hd.decision, hd.reason.as_str()),
+        (Decision::Skip, "outside this table's g range; table hg_grid covers it")
+    );
+    assert!(!plan.has_missing());
     let ms = table(&plan, "ms_lobes_table2");
     let Some(TableDef::MsLobes(d)) = &ms.def else { panic!() };
     // Every channel albedo (0.99, 0.95, 0.9) has its nodes below and above kept, and nothing else is.
@@ -253,7 +260,10 @@ fn consumers_get_the_same_answers_from_pruned_tables() {
     let mut worst = 0.0f64;
     for d in [0.05, 0.5, 2.0, 4.0, 6.4] {
         let e = Emitter::Point { intensity: 1.0, position: [0.0, 0.0, d] };
-        let (a, b) = (qf.irradiance(&medium, &e, &receiver, &opts).unwrap(), qp.irradiance(&medium, &e, &receiver, &opts).unwrap());
+        let (a, b) = (
+            qf.irradiance(&medium, &e, &receiver, &opts).unwrap(),
+            qp.irradiance(&medium, &e, &receiver, &opts).unwrap(),
+        );
         // The trimmed axis's nodes are recomputed from its new end: equal to the full axis's up to rounding.
         assert!((a.direct - b.direct).abs() <= 1e-12 * a.direct, "d {d}: {a:?} {b:?}");
         println!("d {d}: single {:.3e}, total {:.3e}", (a.single - b.single) / a.single, (a.total - b.total) / a.total);

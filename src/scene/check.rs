@@ -10,12 +10,12 @@ use std::collections::HashMap;
 use super::summary::light_area;
 use super::{Boundary, Density, LightKind, Scene, SceneError, SceneWarning};
 
-/// Shortest mean free path accepted without a warning [m] ("opaque within a micron").
+/// Shortest mean free path accepted without a warning \[m\] ("opaque within a micron").
 pub const MIN_MEAN_FREE_PATH: f64 = 1e-6;
 /// Smallest optical thickness across the scene diagonal accepted without a warning ("invisible across a
 /// thousand scene diagonals").
 pub const MIN_DIAGONAL_THICKNESS: f64 = 1e-3;
-/// Plausible irradiance range at half the scene diagonal [W/m²] (about 7 mlux to 70 Mlux).
+/// Plausible irradiance range at half the scene diagonal \[W/m²\] (about 7 mlux to 70 Mlux).
 pub const IRRADIANCE_RANGE: (f64, f64) = (1e-5, 1e5);
 
 /// Runs every check (see the module doc).
@@ -26,7 +26,11 @@ pub fn check(scene: &mut Scene) -> Result<(), SceneError> {
 
     for m in &scene.meshes {
         if let Some(i) = m.positions.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
-            return Err(err(&m.name, format!("vertex {i} is not finite: {:?}", m.positions[i]), "fix or remove the vertex"));
+            return Err(err(
+                &m.name,
+                format!("vertex {i} is not finite: {:?}", m.positions[i]),
+                "fix or remove the vertex",
+            ));
         }
         if m.to_world.iter().flatten().any(|x| !x.is_finite()) {
             return Err(err(&m.name, "the world transform is not finite".into(), "fix the node/xform transform"));
@@ -108,11 +112,18 @@ pub fn check(scene: &mut Scene) -> Result<(), SceneError> {
         }
         if let Density::ExponentialHeight { rho, falloff, direction, offset } = &md.density {
             let len = direction.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if !(rho.is_finite() && *rho >= 0.0 && falloff.is_finite() && finite3(offset) && len.is_finite() && len > 0.0)
+            if !(rho.is_finite()
+                && *rho >= 0.0
+                && falloff.is_finite()
+                && finite3(offset)
+                && len.is_finite()
+                && len > 0.0)
             {
                 return Err(err(
                     &md.name,
-                    format!("exponential density rho {rho}, falloff {falloff}, direction {direction:?}, offset {offset:?}"),
+                    format!(
+                        "exponential density rho {rho}, falloff {falloff}, direction {direction:?}, offset {offset:?}"
+                    ),
                     "rho must be >= 0, falloff and offset finite, direction non-zero",
                 ));
             }
@@ -273,7 +284,8 @@ fn unit_sanity(scene: &mut Scene) {
                      diagonals",
                     max_t * diag
                 ),
-                help: "coefficients are in 1/m; values in 1/km, or a scene authored in the wrong unit, give this".into(),
+                help: "coefficients are in 1/m; values in 1/km, or a scene authored in the wrong unit, give this"
+                    .into(),
             });
         }
     }

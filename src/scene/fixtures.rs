@@ -6,9 +6,8 @@ use super::{Boundary, Density, Light, LightKind, Material, Medium, Mesh, Scene, 
 
 /// An axis-aligned box from `lo` to `hi`, 8 shared vertices, 12 outward (counter-clockwise) triangles.
 pub fn cuboid(name: &str, lo: [f32; 3], hi: [f32; 3]) -> Mesh {
-    let positions: Vec<[f32; 3]> = (0..8)
-        .map(|i| [0, 1, 2].map(|c| if i >> c & 1 == 1 { hi[c] } else { lo[c] }))
-        .collect();
+    let positions: Vec<[f32; 3]> =
+        (0..8).map(|i| [0, 1, 2].map(|c| if i >> c & 1 == 1 { hi[c] } else { lo[c] })).collect();
     let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
     let triangles = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
     Mesh {

@@ -12,11 +12,11 @@
 //!
 //! **Lights** (one convention, radiometric, per linear-RGB channel; photometric inputs divide by
 //! [`LUMENS_PER_WATT`] = 683 lm/W):
-//! - point and spot: radiant intensity `I` [W/sr] (glTF candela / 683; UsdLux treatAsPoint sphere:
+//! - point and spot: radiant intensity `I` \[W/sr\] (glTF candela / 683; UsdLux treatAsPoint sphere:
 //!   `L·πr²`);
-//! - directional: irradiance `E` [W/m²] on a surface facing the light (glTF lux / 683; UsdLux distant:
+//! - directional: irradiance `E` \[W/m²\] on a surface facing the light (glTF lux / 683; UsdLux distant:
 //!   `L` × the solid angle of its `angle`, or `L` itself with `normalize`);
-//! - rectangle, disk, sphere and emissive meshes: emitted radiance `L` [W/(m²·sr)] (UsdLux nits / 683,
+//! - rectangle, disk, sphere and emissive meshes: emitted radiance `L` \[W/(m²·sr)\] (UsdLux nits / 683,
 //!   divided by the world-space area with `normalize`; glTF emissive × emissive strength read as nits).
 //!
 //! **Media.** Coefficients `σ_s`, `σ_a` in 1/m and HG `g`, per channel, scaled by a [`Density`]
@@ -37,7 +37,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-/// Luminous efficacy used to turn photometric inputs into voltab's radiometric units [lm/W].
+/// Luminous efficacy used to turn photometric inputs into voltab's radiometric units \[lm/W\].
 pub const LUMENS_PER_WATT: f64 = 683.0;
 
 /// An RGB triple (linear, per channel).
@@ -116,7 +116,7 @@ pub struct Material {
     pub name: String,
     /// Diffuse reflectance (glTF baseColorFactor, USD diffuseColor).
     pub base_color: Rgb,
-    /// Emitted radiance [W/(m²·sr)], see the module doc.
+    /// Emitted radiance \[W/(m²·sr)\], see the module doc.
     pub emission: Rgb,
     /// Opaque or dielectric.
     pub surface: Surface,
@@ -127,27 +127,27 @@ pub struct Material {
 /// Kinds of light and their geometry (world space, metres, unit directions).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum LightKind {
-    /// Isotropic point light; `radiance` holds intensity [W/sr].
+    /// Isotropic point light; `radiance` holds intensity \[W/sr\].
     Point {
         /// Position.
         position: [f64; 3],
     },
-    /// Spot light; `radiance` holds on-axis intensity [W/sr].
+    /// Spot light; `radiance` holds on-axis intensity \[W/sr\].
     Spot {
         /// Position.
         position: [f64; 3],
         /// Direction the light shines to.
         direction: [f64; 3],
-        /// Full-intensity cone half-angle [rad].
+        /// Full-intensity cone half-angle \[rad\].
         inner_cone: f64,
-        /// Cut-off cone half-angle [rad].
+        /// Cut-off cone half-angle \[rad\].
         outer_cone: f64,
     },
-    /// Distant light; `radiance` holds irradiance [W/m²] on a surface facing it.
+    /// Distant light; `radiance` holds irradiance \[W/m²\] on a surface facing it.
     Directional {
         /// Direction the light travels to.
         direction: [f64; 3],
-        /// Angular diameter of the source [rad] (0 for glTF).
+        /// Angular diameter of the source \[rad\] (0 for glTF).
         angle: f64,
     },
     /// One-sided rectangle emitting along `normal`; `radiance` holds radiance.
@@ -191,8 +191,8 @@ pub struct Light {
     pub name: String,
     /// Geometry.
     pub kind: LightKind,
-    /// Per channel: intensity [W/sr] (point, spot), irradiance [W/m²] (directional) or radiance
-    /// [W/(m²·sr)] (area lights, emissive meshes).
+    /// Per channel: intensity \[W/sr\] (point, spot), irradiance \[W/m²\] (directional) or radiance
+    /// \[W/(m²·sr)\] (area lights, emissive meshes).
     pub radiance: Rgb,
 }
 
@@ -201,16 +201,16 @@ pub struct Light {
 pub enum Projection {
     /// Pinhole camera.
     Perspective {
-        /// Vertical field of view [rad].
+        /// Vertical field of view \[rad\].
         yfov: f64,
         /// Width / height, when the file gives it.
         aspect: Option<f64>,
     },
     /// Parallel projection.
     Orthographic {
-        /// Half-width of the view [m].
+        /// Half-width of the view \[m\].
         xmag: f64,
-        /// Half-height of the view [m].
+        /// Half-height of the view \[m\].
         ymag: f64,
     },
 }
@@ -228,9 +228,9 @@ pub struct Camera {
     pub up: [f64; 3],
     /// Projection.
     pub projection: Projection,
-    /// Near clipping distance [m].
+    /// Near clipping distance \[m\].
     pub znear: f64,
-    /// Far clipping distance [m] (None: infinite).
+    /// Far clipping distance \[m\] (None: infinite).
     pub zfar: Option<f64>,
 }
 
@@ -243,11 +243,11 @@ pub enum Density {
     ExponentialHeight {
         /// Density `ρ'` at the offset plane.
         rho: f64,
-        /// Falloff `b` [1/m].
+        /// Falloff `b` \[1/m\].
         falloff: f64,
         /// Unit direction `n` the density decreases along ("up").
         direction: [f64; 3],
-        /// Point `o` on the reference plane [m].
+        /// Point `o` on the reference plane \[m\].
         offset: [f64; 3],
     },
 }
@@ -266,9 +266,9 @@ pub enum Boundary {
 pub struct Medium {
     /// Material name, node name or prim path it came from.
     pub name: String,
-    /// Scattering coefficient [1/m] per channel at density 1.
+    /// Scattering coefficient \[1/m\] per channel at density 1.
     pub sigma_s: Rgb,
-    /// Absorption coefficient [1/m] per channel at density 1.
+    /// Absorption coefficient \[1/m\] per channel at density 1.
     pub sigma_a: Rgb,
     /// HG mean cosine per channel.
     pub g: Rgb,
@@ -319,7 +319,12 @@ impl fmt::Display for SceneError {
 impl SceneError {
     /// An error at `location` in `file`.
     pub fn at(file: &Path, location: impl Into<String>, message: impl Into<String>, help: impl Into<String>) -> Self {
-        SceneError { file: file.to_path_buf(), location: Some(location.into()), message: message.into(), help: help.into() }
+        SceneError {
+            file: file.to_path_buf(),
+            location: Some(location.into()),
+            message: message.into(),
+            help: help.into(),
+        }
     }
 
     /// An error about the whole file.
@@ -393,7 +398,7 @@ impl Scene {
         lo[0].is_finite().then_some((lo, hi))
     }
 
-    /// Length of the bounds' diagonal [m] (0 for an empty scene).
+    /// Length of the bounds' diagonal \[m\] (0 for an empty scene).
     pub fn diagonal(&self) -> f64 {
         self.bounds().map_or(0.0, |(lo, hi)| ((0..3).map(|c| (hi[c] - lo[c]).powi(2)).sum::<f64>()).sqrt())
     }

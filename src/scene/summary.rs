@@ -36,7 +36,7 @@ pub struct LightSummary {
     pub name: String,
     /// `point`, `spot`, `directional`, `rect`, `disk`, `sphere` or `emissive_mesh`.
     pub kind: &'static str,
-    /// Position or centre [m] (None for directional lights; the mesh centroid for emissive meshes).
+    /// Position or centre \[m\] (None for directional lights; the mesh centroid for emissive meshes).
     pub position: Option<[f64; 3]>,
     /// Emission direction (spot axis, travel direction of a directional light, normal of a rect/disk).
     pub direction: Option<[f64; 3]>,
@@ -44,9 +44,9 @@ pub struct LightSummary {
     pub quantity: &'static str,
     /// Per-channel value in voltab's convention.
     pub value: [f64; 3],
-    /// Emitting area [m²] of area lights and emissive meshes.
+    /// Emitting area \[m²\] of area lights and emissive meshes.
     pub area: Option<f64>,
-    /// Total emitted power per channel [W] (None for directional lights).
+    /// Total emitted power per channel \[W\] (None for directional lights).
     pub power: Option<[f64; 3]>,
     /// Full geometry.
     pub geometry: LightKind,
@@ -57,11 +57,11 @@ pub struct LightSummary {
 pub struct MediumSummary {
     /// Source name.
     pub name: String,
-    /// Scattering coefficient [1/m].
+    /// Scattering coefficient \[1/m\].
     pub sigma_s: [f64; 3],
-    /// Absorption coefficient [1/m].
+    /// Absorption coefficient \[1/m\].
     pub sigma_a: [f64; 3],
-    /// Extinction [1/m].
+    /// Extinction \[1/m\].
     pub sigma_t: [f64; 3],
     /// Single-scattering albedo.
     pub albedo: [f64; 3],
@@ -86,7 +86,7 @@ pub struct SceneSummary {
     pub counts: Counts,
     /// Bounds `[min, max]` in metres (None for an empty scene).
     pub bounds: Option<[[f64; 3]; 2]>,
-    /// Bounds diagonal [m].
+    /// Bounds diagonal \[m\].
     pub diagonal: f64,
     /// Meshes lacking lightmap UVs.
     pub meshes_without_lightmap_uv: Vec<String>,
@@ -114,7 +114,7 @@ fn norm(a: [f64; 3]) -> f64 {
     (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
 }
 
-/// Area [m²] and area-weighted centroid of a mesh.
+/// Area \[m²\] and area-weighted centroid of a mesh.
 pub fn mesh_area(mesh: &super::Mesh) -> (f64, [f64; 3]) {
     let mut area = 0.0;
     let mut c = [0.0; 3];
@@ -132,7 +132,7 @@ pub fn mesh_area(mesh: &super::Mesh) -> (f64, [f64; 3]) {
     (area, c)
 }
 
-/// Emitting area [m²] of a light (None for point, spot and directional lights).
+/// Emitting area \[m²\] of a light (None for point, spot and directional lights).
 pub fn light_area(scene: &Scene, kind: &LightKind) -> Option<f64> {
     use std::f64::consts::PI;
     match kind {
@@ -144,7 +144,7 @@ pub fn light_area(scene: &Scene, kind: &LightKind) -> Option<f64> {
     }
 }
 
-/// Total power [W] per channel of a light (None for directional lights, which have no finite power).
+/// Total power \[W\] per channel of a light (None for directional lights, which have no finite power).
 pub fn light_power(scene: &Scene, light: &super::Light) -> Option<[f64; 3]> {
     use std::f64::consts::PI;
     let v = light.radiance;
@@ -283,7 +283,11 @@ impl SceneSummary {
             let at = l.position.map(|p| format!(" at [{:.4}, {:.4}, {:.4}]", p[0], p[1], p[2])).unwrap_or_default();
             let dir = l.direction.map(|d| format!(" dir [{:.4}, {:.4}, {:.4}]", d[0], d[1], d[2])).unwrap_or_default();
             let v = l.value;
-            let _ = write!(s, "  {} {}{at}{dir}: {} [{:.6e}, {:.6e}, {:.6e}]", l.kind, l.name, l.quantity, v[0], v[1], v[2]);
+            let _ = write!(
+                s,
+                "  {} {}{at}{dir}: {} [{:.6e}, {:.6e}, {:.6e}]",
+                l.kind, l.name, l.quantity, v[0], v[1], v[2]
+            );
             if let Some(a) = l.area {
                 let _ = write!(s, ", area {a:.6e} m^2");
             }
