@@ -175,7 +175,7 @@ impl Needs {
                         matches!(scene.materials.get(k).map(|mat| mat.surface), Some(Surface::Dielectric { ior }) if ior != 1.0)
                     }),
                 };
-                let sigma_t_max = m.sigma_t().iter().copied().fold(0.0, f64::max) * density_max(&m.density, bounds);
+                let sigma_t_max = m.sigma_t().iter().copied().fold(0.0, f64::max) * m.density.max_over(bounds);
                 let need = MediumNeed {
                     name: tag(&m.name),
                     g: m.g,
@@ -205,24 +205,6 @@ impl Needs {
 
     fn all_media(&self) -> impl Iterator<Item = &MediumNeed> {
         self.fog.iter().chain(&self.translucent)
-    }
-}
-
-/// Largest density over the bounds (an exponential is monotone along its direction: a corner holds it).
-fn density_max(d: &Density, bounds: Option<([f64; 3], [f64; 3])>) -> f64 {
-    match d {
-        Density::Homogeneous => 1.0,
-        Density::ExponentialHeight { rho, falloff, direction, offset } => {
-            let Some((lo, hi)) = bounds else { return *rho };
-            let len = direction.iter().map(|x| x * x).sum::<f64>().sqrt().max(f64::MIN_POSITIVE);
-            (0..8)
-                .map(|c| {
-                    let p = [0, 1, 2].map(|k| if c >> k & 1 == 1 { hi[k] } else { lo[k] });
-                    let h: f64 = (0..3).map(|k| (p[k] - offset[k]) * direction[k] / len).sum();
-                    rho * (-falloff * h).exp()
-                })
-                .fold(0.0, f64::max)
-        }
     }
 }
 

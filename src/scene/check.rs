@@ -233,32 +233,13 @@ fn drop_degenerate(scene: &mut Scene) {
     scene.warnings.extend(warnings);
 }
 
-/// Largest density over the scene bounds (the corners and the centre; the exponential is monotone along
-/// its direction, so its maximum over a box is at a corner).
-fn max_density(d: &Density, bounds: Option<([f64; 3], [f64; 3])>) -> f64 {
-    match d {
-        Density::Homogeneous => 1.0,
-        Density::ExponentialHeight { rho, falloff, direction, offset } => {
-            let Some((lo, hi)) = bounds else { return *rho };
-            let len = direction.iter().map(|x| x * x).sum::<f64>().sqrt();
-            (0..8)
-                .map(|c| {
-                    let p = [0, 1, 2].map(|k| if c >> k & 1 == 1 { hi[k] } else { lo[k] });
-                    let h: f64 = (0..3).map(|k| (p[k] - offset[k]) * direction[k] / len).sum();
-                    rho * (-falloff * h).exp()
-                })
-                .fold(0.0, f64::max)
-        }
-    }
-}
-
 fn unit_sanity(scene: &mut Scene) {
     let diag = scene.diagonal();
     let bounds = scene.bounds();
     let mut warnings = Vec::new();
     for md in &scene.media {
         let t = md.sigma_t();
-        let max_t = t.iter().copied().fold(0.0, f64::max) * max_density(&md.density, bounds);
+        let max_t = t.iter().copied().fold(0.0, f64::max) * md.density.max_over(bounds);
         if max_t == 0.0 {
             warnings.push(SceneWarning {
                 location: md.name.clone(),

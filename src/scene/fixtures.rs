@@ -1,7 +1,5 @@
 //! Small hand-built scenes for unit tests (no importer involved).
 
-use std::path::PathBuf;
-
 use super::{Boundary, Density, Light, LightKind, Material, Medium, Mesh, Scene, SceneFormat, Surface};
 
 /// An axis-aligned box from `lo` to `hi`, 8 shared vertices, 12 outward (counter-clockwise) triangles.
@@ -42,16 +40,7 @@ pub fn medium(name: &str, sigma: f64, boundary: Boundary) -> Medium {
 
 /// An empty scene "read" from `file`.
 pub fn empty(file: &str) -> Scene {
-    Scene {
-        source: PathBuf::from(file),
-        format: SceneFormat::Usd,
-        meshes: vec![],
-        materials: vec![],
-        lights: vec![],
-        cameras: vec![],
-        media: vec![],
-        warnings: vec![],
-    }
+    Scene::empty(std::path::Path::new(file), SceneFormat::Usd)
 }
 
 /// A point light of intensity `i` W/sr.

@@ -346,7 +346,42 @@ impl Medium {
     }
 }
 
+impl Density {
+    /// Largest density over an axis-aligned box (the scene bounds; `None`: the density at the offset
+    /// plane). An exponential is monotone along its direction, so a corner of the box holds its maximum.
+    pub fn max_over(&self, bounds: Option<([f64; 3], [f64; 3])>) -> f64 {
+        match self {
+            Density::Homogeneous => 1.0,
+            Density::ExponentialHeight { rho, falloff, direction, offset } => {
+                let Some((lo, hi)) = bounds else { return *rho };
+                let len = direction.iter().map(|x| x * x).sum::<f64>().sqrt().max(f64::MIN_POSITIVE);
+                (0..8)
+                    .map(|c| {
+                        let p = [0, 1, 2].map(|k| if c >> k & 1 == 1 { hi[k] } else { lo[k] });
+                        let h: f64 = (0..3).map(|k| (p[k] - offset[k]) * direction[k] / len).sum();
+                        rho * (-falloff * h).exp()
+                    })
+                    .fold(0.0, f64::max)
+            }
+        }
+    }
+}
+
 impl Scene {
+    /// An empty scene read from `source` (importers fill it).
+    pub fn empty(source: &Path, format: SceneFormat) -> Scene {
+        Scene {
+            source: source.to_path_buf(),
+            format,
+            meshes: Vec::new(),
+            materials: Vec::new(),
+            lights: Vec::new(),
+            cameras: Vec::new(),
+            media: Vec::new(),
+            warnings: Vec::new(),
+        }
+    }
+
     /// Reads a scene, choosing the importer by extension (`.gltf`/`.glb` or `.usd`/`.usda`/`.usdc`/
     /// `.usdz`), then runs [`check::check`]. Warnings land in [`Scene::warnings`].
     pub fn load(path: &Path) -> Result<Scene, SceneError> {

@@ -55,16 +55,7 @@ pub fn import(path: &Path) -> Result<Scene, SceneError> {
         root,
         acc: Accessors { root, buffers: &loaded.buffers },
         materials: Vec::new(),
-        scene: Scene {
-            source: path.to_path_buf(),
-            format: SceneFormat::Gltf,
-            meshes: Vec::new(),
-            materials: Vec::new(),
-            lights: Vec::new(),
-            cameras: Vec::new(),
-            media: Vec::new(),
-            warnings: Vec::new(),
-        },
+        scene: Scene::empty(path, SceneFormat::Gltf),
     };
     for (i, m) in loaded.doc.materials().enumerate() {
         let info = material::read(path, i, &m, &mut im.scene.warnings)?;
