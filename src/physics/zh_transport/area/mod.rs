@@ -171,6 +171,9 @@ pub struct AreaEntry {
     pub fit_error: f64,
 }
 
+/// Largest ZH order [`AreaResponse::lobe_at`] interpolates on the stack (larger orders allocate).
+const MAX_QUERY_ORDER: usize = 32;
+
 /// Tabulated response of the differential-area emitter.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AreaResponse {
@@ -363,7 +366,7 @@ impl Context {
                     if decay == 0.0 || !r.is_finite() || r <= 0.0 {
                         continue;
                     }
-                    table.rows_into(b - 1, r, &mut rows, &mut fits);
+                    table.rows_into(b - 1, r, 0..fits.len(), &mut rows, &mut fits);
                     let (sin_a, cos_a) = (2.0 * x.lo).sin_cos();
                     let factor = 2.0 / d * x.w * decay * r * r;
                     for (jp, &(cos_phi, _)) in self.phi.iter().enumerate() {
@@ -657,13 +660,24 @@ impl AreaResponse {
 
     /// The rows of bounce `b` (`1 ≤ b ≤ B`) at distance `d` for every `θ` node, interpolated in `d` (module
     /// doc): `rows[j·N + l]`, and the fitted axis as `fits[j] = (cos θ_fit, sin θ_fit)`.
-    fn rows_into(&self, b: usize, d: f64, rows: &mut [f64], fits: &mut [(f64, f64)]) {
+    ///
+    /// Only the `θ` nodes in `nodes` are computed: `rows` and `fits` hold them from `nodes.start` on.
+    fn rows_into(&self, b: usize, d: f64, nodes: std::ops::Range<usize>, rows: &mut [f64], fits: &mut [(f64, f64)]) {
         let table = &self.bounces[b - 1];
         let ds = &self.distances;
         let order = self.order();
         let d = if d.is_nan() { f64::INFINITY } else { d.max(1e-150) };
         let n = ds.len();
-        for (j, (out, fit)) in rows.chunks_mut(order).zip(fits.iter_mut()).enumerate() {
+        // The distance bracket is the same for every θ row.
+        let inner = n > 1 && d > ds[0] && d < ds[n - 1];
+        let (i, lambda) = if inner {
+            let i = ds.partition_point(|&x| x <= d) - 1;
+            (i, (d / ds[i]).ln() / (ds[i + 1] / ds[i]).ln())
+        } else {
+            (0, 0.0)
+        };
+        for (k, (out, fit)) in rows.chunks_mut(order).zip(fits.iter_mut()).take(nodes.len()).enumerate() {
+            let j = nodes.start + k;
             let entry = |i: usize| &table[i][j];
             if d <= ds[0] {
                 let (e0, mut scale) = (entry(0), 1.0);
@@ -685,11 +699,9 @@ impl AreaResponse {
                 *fit = (entry(n - 1).theta_fit.cos(), entry(n - 1).theta_fit.sin());
                 continue;
             }
-            let i = ds.partition_point(|&x| x <= d) - 1;
             let (d0, d1) = (ds[i], ds[i + 1]);
             let (e0, e1) = (entry(i), entry(i + 1));
             let (r0, r1) = (&e0.zh, &e1.zh);
-            let lambda = (d / d0).ln() / (d1 / d0).ln();
             // The axis is a line: if the stored angles differ by more than π/2, the nearer representative
             // of the second is its antipode, with the odd coefficients negated.
             let (f1, flip) = antipode_nearest(e0.theta_fit, e1.theta_fit);
@@ -718,23 +730,45 @@ impl AreaResponse {
     /// the second node's axis is replaced by its antipode, odd coefficients negated, when that is nearer);
     /// returns the unit axis as `(cos θ_fit, sin θ_fit)`. `cos_theta` outside the nodes reads the end node.
     fn theta_interp(&self, cos_theta: f64, rows: &[f64], fits: &[(f64, f64)], lobe: &mut [f64]) -> (f64, f64) {
-        let ts = &self.thetas;
-        let order = lobe.len();
-        let n = ts.len();
-        let row = |j: usize| &rows[j * order..(j + 1) * order];
-        // Nodes are increasing in θ, i.e. decreasing in cos θ.
+        self.theta_interp_from(cos_theta, 0, rows, fits, lobe)
+    }
+
+    /// The `θ` nodes [`AreaResponse::theta_interp`] reads for `cos_theta` (one or two).
+    fn theta_nodes(&self, cos_theta: f64) -> std::ops::Range<usize> {
+        let n = self.thetas.len();
         if cos_theta.is_nan() || n == 1 || cos_theta >= self.cos_thetas[0] {
-            lobe.copy_from_slice(row(0));
-            return fits[0];
+            return 0..1;
         }
         if cos_theta <= self.cos_thetas[n - 1] {
-            lobe.copy_from_slice(row(n - 1));
-            return fits[n - 1];
+            return n - 1..n;
         }
         let j = self.cos_thetas.partition_point(|&c| c > cos_theta) - 1;
+        j..j + 2
+    }
+
+    /// [`AreaResponse::theta_interp`] with `rows`/`fits` holding the nodes from `first` on (at least
+    /// [`AreaResponse::theta_nodes`] of `cos_theta`).
+    fn theta_interp_from(
+        &self,
+        cos_theta: f64,
+        first: usize,
+        rows: &[f64],
+        fits: &[(f64, f64)],
+        lobe: &mut [f64],
+    ) -> (f64, f64) {
+        let order = lobe.len();
+        let row = |j: usize| &rows[(j - first) * order..(j - first + 1) * order];
+        let fit = |j: usize| fits[j - first];
+        // Nodes are increasing in θ, i.e. decreasing in cos θ.
+        let nodes = self.theta_nodes(cos_theta);
+        if nodes.len() == 1 {
+            lobe.copy_from_slice(row(nodes.start));
+            return fit(nodes.start);
+        }
+        let j = nodes.start;
         let (c0, c1) = (self.cos_thetas[j], self.cos_thetas[j + 1]);
         let w = ((c0 - cos_theta) / (c0 - c1)).clamp(0.0, 1.0);
-        let (a, b) = (fits[j], fits[j + 1]);
+        let (a, b) = (fit(j), fit(j + 1));
         let sign = if a.0 * b.0 + a.1 * b.1 < 0.0 { -1.0 } else { 1.0 };
         for (l, ((o, x), y)) in lobe.iter_mut().zip(row(j)).zip(row(j + 1)).enumerate() {
             let y = if l % 2 == 1 { sign * y } else { *y };
@@ -755,11 +789,20 @@ impl AreaResponse {
         if !(1..=self.bounces.len()).contains(&b) || order == 0 {
             return (lobe, [0.0, 0.0, 1.0]);
         }
-        let nt = self.thetas.len();
-        let (mut rows, mut fits) = (vec![0.0; nt * order], vec![(1.0, 0.0); nt]);
-        self.rows_into(b, d, &mut rows, &mut fits);
         let cos_theta = if theta.is_nan() { f64::NAN } else { theta.clamp(0.0, PI).cos() };
-        let (c, s) = self.theta_interp(cos_theta, &rows, &fits, &mut lobe);
+        let nodes = self.theta_nodes(cos_theta);
+        let first = nodes.start;
+        let mut rows = [0.0; 2 * MAX_QUERY_ORDER];
+        let mut fits = [(1.0, 0.0); 2];
+        if order > MAX_QUERY_ORDER {
+            let (mut rows, mut fits) = (vec![0.0; nodes.len() * order], vec![(1.0, 0.0); nodes.len()]);
+            self.rows_into(b, d, nodes, &mut rows, &mut fits);
+            let (c, s) = self.theta_interp_from(cos_theta, first, &rows, &fits, &mut lobe);
+            return (lobe, [s, 0.0, c]);
+        }
+        let used = nodes.len();
+        self.rows_into(b, d, nodes, &mut rows[..used * order], &mut fits[..used]);
+        let (c, s) = self.theta_interp_from(cos_theta, first, &rows[..used * order], &fits[..used], &mut lobe);
         (lobe, [s, 0.0, c])
     }
 
