@@ -5,4 +5,6 @@
 
 pub mod beam_adjoint;
 pub mod hg_hp;
+/// Brute-force volumetric path tracer: surface irradiance with volume-to-surface transport.
+pub mod volpath;
 pub mod walk;

@@ -1,0 +1,572 @@
+//! One volumetric path from a receiver: the estimator behind [`super::irradiance`].
+//!
+//! **Input → output.** A receiver (point, unit normal), a [`SampleStream`] → one sample of the
+//! irradiance `E = ∫ L_i cos θ dω` per channel (unbiased; the mean over paths is the estimate).
+//!
+//! **Estimator.** The receiver is vertex 0 with "BSDF" `cos θ` (cosine sampling, weight `π`). At every
+//! vertex — the receiver, a Lambertian surface point (albedo `k`, BSDF `k/π`), a collision in a
+//! medium (HG phase) — next-event estimation to every light, then a direction from the BSDF or phase
+//! function and a free flight (`flight.rs`) to the next collision or surface. Emission is gathered
+//! two ways: next-event samples, and unidirectional hits on the front side of emissive meshes (the
+//! only emitters that are geometry). Both are combined with the balance heuristic, and the same
+//! heuristic handles chromatic media (hero-channel spectral MIS): the tracking channel `h` is drawn
+//! uniformly per path and every technique's pdf is kept per channel, so a path `x̄` ending with
+//! technique `t` contributes `f(x̄) / (⅓ Σ_c Σ_t' p_{c,t'}(x̄))` (the per-channel ratios `r_u`, `r_l`
+//! below are these pdfs divided by the hero's, renormalised at every vertex so they never
+//! overflow). The unidirectional pdf of an emitter hit includes the free-flight escape probability
+//! `T_c` of the last segment; the next-event pdf is the light's solid-angle pdf. Delta lights and the
+//! analytic area lights (rect, disk, sphere: not geometry, so never hit) are gathered by next-event
+//! estimation alone. For point and spot lights, next-event estimation at a leg's free-flight collision
+//! is balanced against a second estimate of the same single-collision integral from a distance
+//! sampled equiangularly along the leg (Kulla & Fajardo 2012, pdf `D/((θ_b − θ_a)(D² + (t − Δ)²))`),
+//! which cancels the `1/r²` of collisions near the light. Transmittance of shadow rays is exact
+//! ([`crate::scene::bvh::optical_thickness`]).
+//!
+//! **Surfaces.** Lambertian with the material's `base_color` (no material: 0.8 grey), two-sided, with
+//! the geometric normal. Index-matched boundaries (a mesh bounding a medium whose material is missing
+//! or a dielectric with `ior = 1`, and any `ior = 1` dielectric) are invisible: rays and shadow rays
+//! continue from the hit. Refractive dielectrics are smooth Fresnel interfaces (reflect with
+//! probability `F`, else refract by Snell's law, total internal reflection included; radiance scales
+//! by `(η_from/η_to)²` when a traced ray crosses). Next-event rays cannot cross them: lights outside a
+//! refractive boundary reach its inside only through unidirectional paths ending on emissive meshes
+//! (point, spot, directional and analytic area lights do not light the inside at all).
+//!
+//! **Termination.** `max_depth` counts vertices after the receiver (scattering events, diffuse
+//! bounces and specular events); the last vertex still gathers emission both ways so the MIS pair is
+//! complete. Russian roulette from vertex `rr_depth` on, with survival `min(1, max_c w_c/π)`.
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+
+use super::VolPathOptions;
+use super::flight::{self, Flight};
+use super::lights::{self, LightSample, PreparedLight};
+use crate::physics::hg;
+use crate::physics::rng::SampleStream;
+use crate::scene::bvh::{Hit, MediumSegment, Ray, SceneBvh};
+use crate::scene::{Scene, Surface};
+
+/// How a mesh's surface treats light.
+#[derive(Debug, Clone, Copy)]
+enum SurfaceKind {
+    Lambert([f64; 3]),
+    PassThrough,
+    Dielectric(f64),
+}
+
+/// Everything a path needs about the scene, prepared once.
+pub struct Context<'a> {
+    scene: &'a Scene,
+    bvh: &'a SceneBvh,
+    opts: &'a VolPathOptions,
+    lights: Vec<PreparedLight>,
+    kinds: Vec<SurfaceKind>,
+    /// Per mesh, the prepared emissive-mesh lights it carries.
+    emitters: Vec<Vec<usize>>,
+    any_pass_through: bool,
+    media: bool,
+    /// Length scale of the scene \[m\] for ray-origin offsets.
+    scale: f64,
+}
+
+/// Random numbers of one path, drawn in order.
+struct Draws {
+    stream: SampleStream,
+    dim: u32,
+}
+
+impl Draws {
+    fn next(&mut self) -> f64 {
+        let u = self.stream.uniform(self.dim);
+        self.dim = self.dim.wrapping_add(1);
+        u
+    }
+}
+
+/// A vertex where light is gathered and a direction sampled.
+#[derive(Debug, Clone, Copy)]
+enum Vertex {
+    /// Receiver or Lambertian point: position, ray origin (offset along the side normal), side
+    /// normal, `k` (BSDF `k/π`).
+    Surface { p: DVec3, o: DVec3, n: DVec3, k: [f64; 3] },
+    /// Collision in a medium: position, direction the path arrived along, HG `g` per channel, and the
+    /// leg it was sampled on (for the equiangular MIS weights).
+    Medium { p: DVec3, d_in: DVec3, g: [f64; 3], leg: Leg },
+}
+
+/// A straight flight: origin, unit direction, end, and per channel the factor turning an equiangular
+/// pdf at the collision into a ratio comparable with `r_u` there (`r_dir / (σ_t,h T_h)`).
+#[derive(Debug, Clone, Copy)]
+struct Leg {
+    origin: DVec3,
+    dir: DVec3,
+    t_end: f64,
+    scale: [f64; 3],
+}
+
+impl Leg {
+    /// Equiangular pdf (Kulla & Fajardo 2012) of distance `t ∈ [0, t_end)` for a light at `light`:
+    /// `D / ((θ_b − θ_a)(D² + (t − Δ)²))`; 0 when the leg passes through the light (`D ≈ 0`).
+    fn pdf(&self, light: DVec3, t: f64) -> f64 {
+        let Some((delta, d, span)) = self.angles(light) else { return 0.0 };
+        d / (span.1 - span.0) / (d * d + (t - delta) * (t - delta))
+    }
+
+    /// `(Δ, D, (θ_a, θ_b))` of the leg relative to `light`.
+    fn angles(&self, light: DVec3) -> Option<(f64, f64, (f64, f64))> {
+        let rel = light - self.origin;
+        let delta = rel.dot(self.dir);
+        let d = (rel - delta * self.dir).length();
+        if d.is_nan() || d <= 1e-12 * (1.0 + rel.length()) || !d.is_finite() {
+            return None;
+        }
+        let ta = (-delta).atan2(d);
+        let tb = if self.t_end.is_finite() { (self.t_end - delta).atan2(d) } else { std::f64::consts::FRAC_PI_2 };
+        (tb > ta).then_some((delta, d, (ta, tb)))
+    }
+
+    /// An equiangular distance for uniform `xi`.
+    fn sample(&self, light: DVec3, xi: f64) -> Option<f64> {
+        let (delta, d, (ta, tb)) = self.angles(light)?;
+        let t = delta + d * (ta + xi * (tb - ta)).tan();
+        (t.is_finite() && t >= 0.0).then(|| if self.t_end.is_finite() { t.min(self.t_end) } else { t })
+    }
+}
+
+/// Per-channel path state (see the module doc).
+struct State {
+    hero: usize,
+    /// Throughput over the hero's pdf.
+    beta: [f64; 3],
+    /// Unidirectional pdfs per channel over the hero's.
+    r_u: [f64; 3],
+}
+
+impl State {
+    /// Weight of a contribution whose techniques' pdf ratios sum to `denom` per channel.
+    fn mean(r: [f64; 3]) -> f64 {
+        (r[0] + r[1] + r[2]) / 3.0
+    }
+
+    /// Rescales `beta` and `r_u` by the same factor so that `max r_u = 1`; returns the divisor.
+    fn renormalise(&mut self) -> f64 {
+        let m = self.r_u.iter().fold(0.0f64, |m, &x| m.max(x));
+        if m > 0.0 && m.is_finite() {
+            self.r_u = self.r_u.map(|x| x / m);
+            self.beta = self.beta.map(|x| x / m);
+            m
+        } else {
+            1.0
+        }
+    }
+}
+
+/// `exp(x)` capped so that products with zero stay zero (never `∞`).
+fn exp_capped(x: f64) -> f64 {
+    x.min(700.0).exp()
+}
+
+fn hg_phase(mu: f64, g: f64) -> f64 {
+    hg::phase(mu, g.clamp(-0.999_999, 0.999_999))
+}
+
+impl<'a> Context<'a> {
+    /// Prepares lights and surface kinds.
+    pub fn new(scene: &'a Scene, bvh: &'a SceneBvh, opts: &'a VolPathOptions) -> Self {
+        let lights = PreparedLight::prepare_all(scene);
+        let mut emitters = vec![Vec::new(); scene.meshes.len()];
+        for (i, l) in lights.iter().enumerate() {
+            if let Some(m) = l.mesh {
+                emitters[m].push(i);
+            }
+        }
+        let kinds: Vec<SurfaceKind> = scene
+            .meshes
+            .iter()
+            .enumerate()
+            .map(|(i, m)| {
+                let mat = m.material.and_then(|j| scene.materials.get(j));
+                match mat.map(|x| x.surface) {
+                    Some(Surface::Dielectric { ior: 1.0 }) => SurfaceKind::PassThrough,
+                    Some(Surface::Dielectric { ior }) if ior.is_finite() && ior > 0.0 => SurfaceKind::Dielectric(ior),
+                    None if bvh.medium_bounded_by(i).is_some() => SurfaceKind::PassThrough,
+                    _ => SurfaceKind::Lambert(
+                        mat.map_or([0.8; 3], |x| x.base_color).map(|a| if a.is_finite() { a.max(0.0) } else { 0.0 }),
+                    ),
+                }
+            })
+            .collect();
+        let any_pass_through = kinds.iter().any(|k| matches!(k, SurfaceKind::PassThrough));
+        let scale = scene.diagonal();
+        let scale = if scale.is_finite() { scale } else { 0.0 };
+        Context {
+            scene,
+            bvh,
+            opts,
+            lights,
+            kinds,
+            emitters,
+            any_pass_through,
+            media: opts.media && !scene.media.is_empty(),
+            scale,
+        }
+    }
+
+    /// Ray-origin offset at `p` \[m\]: a few hundred f32 ulps of the coordinates and the scene size.
+    fn eps(&self, p: DVec3) -> f64 {
+        1e-5 * (p.abs().max_element() + 0.01 * self.scale) + 1e-9
+    }
+
+    /// Closest hit that is not an index-matched boundary.
+    fn closest(&self, ray: &Ray, rays: &mut u64) -> Option<Hit> {
+        let mut r = *ray;
+        loop {
+            *rays += 1;
+            let h = self.bvh.closest_hit(&r)?;
+            if !matches!(self.kinds.get(h.mesh), Some(SurfaceKind::PassThrough)) {
+                return Some(h);
+            }
+            if h.t.is_nan() || h.t <= r.t_min {
+                return None;
+            }
+            r.t_min = h.t;
+        }
+    }
+
+    /// Per-channel transmittance from `p` along unit `dir` over `dist` (`∞` allowed), `None` when
+    /// geometry other than index-matched boundaries blocks the ray from the offset origin `o` along
+    /// `shadow_dir` before `t_block`.
+    #[allow(clippy::too_many_arguments)]
+    fn transmittance(
+        &self,
+        o: DVec3,
+        p: DVec3,
+        dir: DVec3,
+        shadow_dir: DVec3,
+        dist: f64,
+        t_block: f64,
+        rays: &mut u64,
+    ) -> Option<[f64; 3]> {
+        let ray = Ray { origin: o.to_array(), direction: shadow_dir.to_array(), t_min: 0.0, t_max: t_block };
+        if t_block > 0.0 {
+            if self.any_pass_through {
+                if self.closest(&ray, rays).is_some_and(|h| h.t < t_block) {
+                    return None;
+                }
+            } else {
+                *rays += 1;
+                if self.bvh.occluded_ray(&ray) {
+                    return None;
+                }
+            }
+        }
+        if !self.media {
+            return Some([1.0; 3]);
+        }
+        *rays += 1;
+        let ray = Ray { origin: p.to_array(), direction: dir.to_array(), ..ray };
+        let segs = self.bvh.media_segments(self.scene, &ray, dist);
+        Some(flight::depth(self.scene, &ray, &segs).map(|t| (-t).exp()))
+    }
+
+    /// One path's irradiance sample at receiver `x` with unit normal `n`.
+    pub fn trace(&self, x: DVec3, n: DVec3, stream: SampleStream, rays: &mut u64) -> [f64; 3] {
+        let mut draws = Draws { stream, dim: 0 };
+        let hero = ((draws.next() * 3.0) as usize).min(2);
+        let mut st = State { hero, beta: [1.0; 3], r_u: [1.0; 3] };
+        let mut out = [0.0; 3];
+        let mut vertex = Vertex::Surface { p: x, o: x + n * self.eps(x), n, k: [PI; 3] };
+        let mut depth = 0u32;
+        loop {
+            self.next_event(&vertex, &st, &mut draws, &mut out, rays);
+            let last = depth >= self.opts.max_depth;
+            // Direction sampling: throughput and per-channel pdf ratios.
+            let (u1, u2) = (draws.next(), draws.next());
+            let r_prefix = st.r_u;
+            let (origin, dir, p_dir_hero) = match vertex {
+                Vertex::Surface { o, n, k, .. } => {
+                    let (t1, t2) = lights::frame(n);
+                    let r = u1.sqrt();
+                    let phi = std::f64::consts::TAU * u2;
+                    let cz = (1.0 - u1).max(0.0).sqrt();
+                    let dir = (r * phi.cos() * t1 + r * phi.sin() * t2 + cz * n).normalize();
+                    st.beta = [0, 1, 2].map(|c| st.beta[c] * k[c]);
+                    (o, dir, cz / PI)
+                }
+                Vertex::Medium { p, d_in, g, .. } => {
+                    let mu = hg::sample_mu(u1, g[hero].clamp(-0.999_999, 0.999_999));
+                    let (t1, t2) = lights::frame(d_in);
+                    let phi = std::f64::consts::TAU * u2;
+                    let sin = (1.0 - mu * mu).max(0.0).sqrt();
+                    let dir = (mu * d_in + sin * (phi.cos() * t1 + phi.sin() * t2)).normalize();
+                    let mu = d_in.dot(dir);
+                    let ph = g.map(|gc| hg_phase(mu, gc));
+                    let h = ph[hero];
+                    if !(h > 0.0 && h.is_finite()) {
+                        return out;
+                    }
+                    st.beta = [0, 1, 2].map(|c| st.beta[c] * ph[c] / h);
+                    st.r_u = [0, 1, 2].map(|c| st.r_u[c] * ph[c] / h);
+                    (p, dir, h)
+                }
+            };
+            if p_dir_hero.is_nan() || p_dir_hero <= 0.0 || st.beta.iter().all(|&b| b == 0.0) {
+                return out;
+            }
+            // Russian roulette on the MIS-weighted throughput.
+            let xi_rr = draws.next();
+            if depth >= self.opts.rr_depth {
+                let w = st.beta.iter().fold(0.0f64, |m, &b| m.max(b)) / State::mean(st.r_u);
+                let q = (w / PI).min(1.0);
+                if q.is_nan() || q <= 0.0 || xi_rr >= q {
+                    return out;
+                }
+                st.beta = st.beta.map(|b| b / q);
+            }
+            // Next-event pdf ratios of the coming emitter hit (per unit light pdf, before escape).
+            let r_l = r_prefix.map(|r| r / p_dir_hero);
+            let leg = Leg { origin, dir, t_end: f64::INFINITY, scale: st.r_u };
+            match self.flight(leg, &mut st, r_l, last, &mut draws, &mut out, &mut depth, rays) {
+                Some(v) if !last => vertex = v,
+                _ => return out,
+            }
+            if st.beta.iter().all(|&b| b == 0.0) {
+                return out;
+            }
+            let m = st.renormalise();
+            if let Vertex::Medium { leg, .. } = &mut vertex {
+                leg.scale = leg.scale.map(|x| x / m);
+            }
+        }
+    }
+
+    /// Next-event estimation to every light from `vertex`.
+    fn next_event(&self, vertex: &Vertex, st: &State, draws: &mut Draws, out: &mut [f64; 3], rays: &mut u64) {
+        for light in &self.lights {
+            let (u, v) = (draws.next(), draws.next());
+            let (p, o) = match *vertex {
+                Vertex::Surface { p, o, .. } => (p, o),
+                Vertex::Medium { p, .. } => (p, p),
+            };
+            let Some(s) = light.sample(p, u, v) else { continue };
+            if s.value.iter().all(|&x| x.is_nan() || x <= 0.0) {
+                continue;
+            }
+            // BSDF or phase value per channel and the unidirectional pdf per channel.
+            let (f, p_dir) = match *vertex {
+                Vertex::Surface { n, k, .. } => {
+                    let cos = n.dot(s.dir);
+                    if cos.is_nan() || cos <= 0.0 {
+                        continue;
+                    }
+                    (k.map(|kc| kc / PI * cos), [cos / PI; 3])
+                }
+                Vertex::Medium { d_in, g, .. } => {
+                    let mu = d_in.dot(s.dir);
+                    let ph = g.map(|gc| hg_phase(mu, gc));
+                    (ph, ph)
+                }
+            };
+            if f.iter().all(|&x| x.is_nan() || x <= 0.0) {
+                continue;
+            }
+            // A target on geometry: aim the shadow ray from the offset origin and stop short of it.
+            let (shadow_dir, block) = if s.on_surface {
+                let q = p + s.dir * s.dist;
+                let d = q - o;
+                let len = d.length();
+                (d / len, len * (1.0 - 1e-7) - self.eps(q))
+            } else {
+                (s.dir, s.dist)
+            };
+            let Some(tr) = self.transmittance(o, p, s.dir, shadow_dir, s.dist, block, rays) else { continue };
+            let LightSample { value, pdf, .. } = s;
+            let denom = match (pdf, vertex, light.position()) {
+                (Some(pl), _, _) => State::mean([0, 1, 2].map(|c| st.r_u[c] * (1.0 + p_dir[c] * tr[c] / pl))),
+                (None, Vertex::Medium { leg, .. }, Some(lp)) => {
+                    // Balance against the equiangular sample of the same leg (see `equiangular`).
+                    let pe = leg.pdf(lp, (p - leg.origin).dot(leg.dir));
+                    State::mean([0, 1, 2].map(|c| st.r_u[c] + leg.scale[c] * pe))
+                }
+                (None, _, _) => State::mean(st.r_u),
+            };
+            for (c, o) in out.iter_mut().enumerate() {
+                let add = st.beta[c] * f[c] * tr[c] * value[c] / denom;
+                if add > 0.0 {
+                    *o += add;
+                }
+            }
+        }
+    }
+
+    /// Flies from `origin` along `dir` through index-matched boundaries and specular events; gathers
+    /// emitter hits; returns the next diffuse or medium vertex, or `None` when the path ends.
+    #[allow(clippy::too_many_arguments)]
+    fn flight(
+        &self,
+        leg: Leg,
+        st: &mut State,
+        mut r_l: [f64; 3],
+        last: bool,
+        draws: &mut Draws,
+        out: &mut [f64; 3],
+        depth: &mut u32,
+        rays: &mut u64,
+    ) -> Option<Vertex> {
+        let (mut origin, mut dir) = (leg.origin, leg.dir);
+        *depth += 1;
+        loop {
+            let ray = Ray { origin: origin.to_array(), direction: dir.to_array(), t_min: 0.0, t_max: f64::INFINITY };
+            let hit = self.closest(&ray, rays);
+            let t_end = hit.map_or(f64::INFINITY, |h| h.t);
+            let xi = draws.next();
+            let segs: Vec<MediumSegment> = if self.media {
+                *rays += 1;
+                self.bvh.media_segments(self.scene, &ray, t_end)
+            } else {
+                Vec::new()
+            };
+            let Flight { collision, tau } = flight::fly(self.scene, &ray, &segs, st.hero, xi);
+            let h = st.hero;
+            let leg = Leg { origin, dir, t_end, scale: st.r_u };
+            if !last {
+                self.equiangular(&leg, &segs, st, draws, out, rays);
+            }
+            if let Some(c) = collision {
+                let sh = c.sigma_t[h];
+                if !(sh > 0.0 && sh.is_finite()) {
+                    return None;
+                }
+                let ratio = |k: usize| exp_capped(tau[h] - tau[k]);
+                let th_inv = exp_capped(tau[h]);
+                st.beta = [0, 1, 2].map(|k| st.beta[k] * c.sigma_s[k] * ratio(k) / sh);
+                st.r_u = [0, 1, 2].map(|k| st.r_u[k] * c.sigma_t[k] * ratio(k) / sh);
+                let g = self.scene.media[c.medium].g;
+                let leg = Leg { scale: leg.scale.map(|r| r * th_inv / sh), ..leg };
+                return Some(Vertex::Medium { p: origin + c.t * dir, d_in: dir, g, leg });
+            }
+            // Escaped the media up to the hit (or to infinity): weight T_c / T_h.
+            let ratio = |k: usize| exp_capped(tau[h] - tau[k]);
+            st.beta = [0, 1, 2].map(|k| st.beta[k] * ratio(k));
+            st.r_u = [0, 1, 2].map(|k| st.r_u[k] * ratio(k));
+            let inv_th = exp_capped(tau[h]);
+            r_l = r_l.map(|r| r * inv_th);
+            let hit = hit?;
+            let p = origin + hit.t * dir;
+            let ng = DVec3::from_array(hit.geometric_normal);
+            if hit.front_face {
+                self.gather_emission(&hit, dir, ng, st, r_l, out);
+            }
+            if !self.opts.surface_bounces {
+                return None;
+            }
+            let side = if dir.dot(ng) < 0.0 { ng } else { -ng };
+            match self.kinds[hit.mesh] {
+                SurfaceKind::Lambert(k) => {
+                    return Some(Vertex::Surface { p, o: p + side * self.eps(p), n: side, k });
+                }
+                SurfaceKind::PassThrough => return None, // `closest` never reports these
+                SurfaceKind::Dielectric(ior) => {
+                    *depth += 1;
+                    if *depth > self.opts.max_depth + 1 {
+                        return None;
+                    }
+                    let (eta_from, eta_to) = if hit.front_face { (1.0, ior) } else { (ior, 1.0) };
+                    let xi = draws.next();
+                    let cos_i = -dir.dot(side);
+                    let eta = eta_from / eta_to;
+                    let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
+                    let fresnel =
+                        if sin2_t >= 1.0 { 1.0 } else { fresnel(cos_i, (1.0 - sin2_t).sqrt(), eta_from, eta_to) };
+                    if xi < fresnel {
+                        dir = (dir + 2.0 * cos_i * side).normalize();
+                        origin = p + side * self.eps(p);
+                    } else {
+                        let cos_t = (1.0 - sin2_t).sqrt();
+                        dir = (eta * dir + (eta * cos_i - cos_t) * side).normalize();
+                        origin = p - side * self.eps(p);
+                        let scale = eta * eta;
+                        st.beta = st.beta.map(|b| b * scale);
+                    }
+                    // A specular vertex: next-event estimation cannot produce the coming hit.
+                    r_l = [0.0; 3];
+                }
+            }
+        }
+    }
+
+    /// Equiangular next-event estimation to each point and spot light along one leg: a distance `t`
+    /// with pdf `p_e(t)` ([`Leg::pdf`]), next-event estimation from the point there, balanced against
+    /// the same next-event estimate at the leg's free-flight collision (pdf `σ_t,c T_c` per channel).
+    /// Removes the `1/r²` singularity of collisions near the light.
+    fn equiangular(
+        &self,
+        leg: &Leg,
+        segs: &[MediumSegment],
+        st: &State,
+        draws: &mut Draws,
+        out: &mut [f64; 3],
+        rays: &mut u64,
+    ) {
+        for light in &self.lights {
+            let xi = draws.next();
+            let (u, v) = (draws.next(), draws.next());
+            let Some(lp) = light.position().filter(|_| !segs.is_empty()) else { continue };
+            let Some(t) = leg.sample(lp, xi) else { continue };
+            let pe = leg.pdf(lp, t);
+            let Some(seg) = segs.iter().find(|s| s.t0 <= t && t < s.t1) else { continue };
+            let Some(medium) = seg.medium.and_then(|i| self.scene.media.get(i)) else { continue };
+            let x = leg.origin + t * leg.dir;
+            let rho = flight::density_at(&medium.density, x);
+            let ray = Ray { origin: leg.origin.to_array(), direction: leg.dir.to_array(), t_min: 0.0, t_max: t };
+            let upto: Vec<MediumSegment> = segs
+                .iter()
+                .filter(|s| s.t0 < t)
+                .map(|s| MediumSegment { t0: s.t0, t1: s.t1.min(t), medium: s.medium })
+                .collect();
+            let tau = flight::depth(self.scene, &ray, &upto);
+            let Some(s) = light.sample(x, u, v) else { continue };
+            let mu = leg.dir.dot(s.dir);
+            let f = medium.g.map(|g| hg_phase(mu, g));
+            let Some(tr) = self.transmittance(x, x, s.dir, s.dir, s.dist, s.dist, rays) else { continue };
+            let trans = tau.map(|x| (-x).exp());
+            let denom = State::mean([0, 1, 2].map(|c| leg.scale[c] * (medium.sigma_t()[c] * rho * trans[c] + pe)));
+            for (c, o) in out.iter_mut().enumerate() {
+                let add = st.beta[c] * medium.sigma_s[c] * rho * trans[c] * f[c] * tr[c] * s.value[c] / denom;
+                if add > 0.0 {
+                    *o += add;
+                }
+            }
+        }
+    }
+
+    /// Adds the emission of the emissive-mesh lights on `hit` (front side), MIS-weighted against
+    /// next-event estimation of the same light from the previous vertex.
+    fn gather_emission(&self, hit: &Hit, dir: DVec3, ng: DVec3, st: &State, r_l: [f64; 3], out: &mut [f64; 3]) {
+        let Some(list) = self.emitters.get(hit.mesh) else { return };
+        for &li in list {
+            let light = &self.lights[li];
+            let Some(area) = light.mesh_area() else { continue };
+            let cos = dir.dot(ng).abs();
+            let pl = hit.t * hit.t / (area * cos);
+            let pl = if pl.is_finite() { pl } else { f64::MAX };
+            let denom = State::mean([0, 1, 2].map(|c| st.r_u[c] + r_l[c] * pl));
+            for (c, o) in out.iter_mut().enumerate() {
+                let add = st.beta[c] * light.radiance[c] / denom;
+                if add > 0.0 {
+                    *o += add;
+                }
+            }
+        }
+    }
+}
+
+/// Unpolarised Fresnel reflectance of a smooth dielectric interface (cosines of the incident and
+/// transmitted angles, indices of both sides).
+fn fresnel(cos_i: f64, cos_t: f64, eta_i: f64, eta_t: f64) -> f64 {
+    let rs = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t);
+    let rp = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
+    let f = 0.5 * (rs * rs + rp * rp);
+    if f.is_finite() { f.clamp(0.0, 1.0) } else { 1.0 }
+}
