@@ -126,6 +126,13 @@ enum Command {
         /// Output folder.
         #[arg(long, default_value = "report")]
         out: PathBuf,
+        /// Only the stages' error-vs-time ladders (a lightmap bake against volumetric path tracing),
+        /// skipping the tables' ladders. Tables the stages read are compiled into --tables first.
+        #[arg(long)]
+        stages: bool,
+        /// Where the stages' tables are compiled (cached).
+        #[arg(long, default_value = "out")]
+        tables: PathBuf,
     },
     /// Timings side by side as ratios: cold vs no-op compile, 1 vs N threads, zstd levels, ZH query throughput.
     Bench {
@@ -149,6 +156,13 @@ enum Command {
         /// Only the ray benchmark (no pipeline tables).
         #[arg(long)]
         rays_only: bool,
+        /// Only the lightmap-bake benchmark of the pipeline's BakeLightmaps stages: texels/s and rays/s per
+        /// mode, the Full/Surface overhead, and the speed-up over volumetric path tracing at equal error.
+        #[arg(long)]
+        bake: bool,
+        /// Where the bake's tables are compiled (cached).
+        #[arg(long, default_value = "out")]
+        tables: PathBuf,
     },
     /// Evaluate a compiled table at one configuration.
     Eval {
@@ -373,6 +387,19 @@ fn bundled_scenes() -> Vec<PathBuf> {
     v
 }
 
+/// The folder relative stage paths resolve against: the pipeline file's.
+fn base_dir(p: &ValidatedPipeline) -> PathBuf {
+    p.path().parent().map(Path::to_path_buf).unwrap_or_default()
+}
+
+/// Whether two paths name the same file (by canonical path when both exist).
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    }
+}
+
 /// Imports a scene; its warnings go to stderr.
 fn load_scene(path: &Path) -> Result<voltab::scene::Scene> {
     // Scene errors are complete messages (file, node/prim, fix).
@@ -380,9 +407,21 @@ fn load_scene(path: &Path) -> Result<voltab::scene::Scene> {
 }
 
 /// The pipeline pruned to what `scenes` need (unchanged when there are none); the plan goes to stderr.
+///
+/// The scenes that stages read (a bake's scene) are planned for too, so the tables they need are kept.
 fn planned(p: ValidatedPipeline, scenes: &[PathBuf], quiet: bool) -> Result<ValidatedPipeline> {
     if scenes.is_empty() {
         return Ok(p);
+    }
+    let mut scenes = scenes.to_vec();
+    for s in p.stages() {
+        for f in s.def().scenes(&base_dir(&p)) {
+            // The built-in default pipeline outside a checkout names scenes that are not here.
+            let embedded_elsewhere = !f.exists() && !p.path().exists();
+            if !embedded_elsewhere && !scenes.iter().any(|g| same_file(g, &f)) {
+                scenes.push(f);
+            }
+        }
     }
     let loaded = scenes.iter().map(|f| load_scene(f)).collect::<Result<Vec<_>>>()?;
     for s in &loaded {
@@ -415,8 +454,20 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             let p = planned(load(&pipeline)?, &scene, json)?;
             let summary = compile(&p, &CompileOptions { out_dir: out.clone(), only: Vec::new(), jobs, progress })?;
             let mut stage_results = Vec::new();
+            let base = base_dir(&p);
+            let ctx = voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress };
             for s in p.stages() {
-                stage_results.push((s.id().to_owned(), s.def().run(s.id(), &out)?));
+                let missing: Vec<PathBuf> = s.def().scenes(&base).into_iter().filter(|f| !f.exists()).collect();
+                if !missing.is_empty() && !pipeline.exists() {
+                    // The built-in default pipeline outside a checkout: its bundled scenes are not here.
+                    eprintln!(
+                        "note: stage {} skipped: {} not found (run from a voltab checkout)",
+                        s.id(),
+                        missing[0].display()
+                    );
+                    continue;
+                }
+                stage_results.push((s.id().to_owned(), s.def().run(s.id(), &ctx)?));
             }
             if json {
                 println!(
@@ -543,15 +594,49 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 return Ok(ExitCode::FAILURE);
             }
         }
-        Command::Report { pipeline, out } => {
-            let p = load(&pipeline)?;
-            let r = voltab::report::run(&p, &out, progress)?;
-            print!("{}", voltab::report::markdown(&r));
-            println!("wrote {}/report.json, report.md and {} plots", out.display(), r.tables.len());
+        Command::Report { pipeline, out, stages, tables } => {
+            if !stages {
+                let p = load(&pipeline)?;
+                let r = voltab::report::run(&p, &out, progress)?;
+                print!("{}", voltab::report::markdown(&r));
+                println!("wrote {}/report.json, report.md and {} plots", out.display(), r.tables.len());
+            }
+            // Stage ladders: compile what the stages' scenes need (cached), then measure.
+            let p = planned(load(&pipeline)?, &[], true)?;
+            let staged: Vec<_> = p.stages().iter().filter(|s| !s.def().scenes(&base_dir(&p)).is_empty()).collect();
+            if !staged.is_empty() {
+                let scenes: Vec<PathBuf> = staged.iter().flat_map(|s| s.def().scenes(&base_dir(&p))).collect();
+                let p = planned(load(&pipeline)?, &scenes, true)?;
+                compile(&p, &CompileOptions { out_dir: tables.clone(), only: Vec::new(), jobs: None, progress })?;
+                let base = base_dir(&p);
+                let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                for s in p.stages() {
+                    if let Some(md) = s.def().report(s.id(), &ctx, &out)? {
+                        print!("{md}");
+                        println!(
+                            "wrote {}/{}-lightmap.json, .md and -lightmap-error-vs-time.png",
+                            out.display(),
+                            s.id()
+                        );
+                    }
+                }
+            }
         }
-        Command::Bench { pipeline, json, only, tables_only, rays, rays_only } => {
+        Command::Bench { pipeline, json, only, tables_only, rays, rays_only, bake, tables } => {
             let mut rows = Vec::new();
-            if !rays_only {
+            if bake {
+                let p0 = load(&pipeline)?;
+                let scenes: Vec<PathBuf> = p0.stages().iter().flat_map(|s| s.def().scenes(&base_dir(&p0))).collect();
+                let p = planned(p0, &scenes, true)?;
+                compile(&p, &CompileOptions { out_dir: tables.clone(), only: Vec::new(), jobs: None, progress })?;
+                let base = base_dir(&p);
+                let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                for s in p.stages() {
+                    if let voltab::stages::StageDef::BakeLightmaps(b) = s.def() {
+                        rows.extend(b.bench(s.id(), &ctx)?);
+                    }
+                }
+            } else if !rays_only {
                 let p = load(&pipeline)?;
                 rows = voltab::bench::run(&p, &voltab::bench::BenchOptions { only, tables_only })?;
             }

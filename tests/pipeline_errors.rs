@@ -5,7 +5,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{tempdir, write};
+use common::{tempdir, text, write};
 use voltab::pipeline::{DiagnosticKind as K, Disk, Limits, PipelineError, load_and_validate, parse::load, validate};
 use voltab::tables::TableDef;
 use voltab::tables::phase_hg::GValues;
@@ -204,7 +204,7 @@ fn the_bundled_pipelines_validate() {
     let v = load_and_validate(&common::root().join("pipelines/default.ron"), &Disk).unwrap();
     assert_eq!(v.tables().len(), 5);
     assert_eq!(phase(&v, "hg_dubouchet").zh_order, 16, "override from default.ron applies to the included table");
-    assert_eq!(v.stages().len(), 2);
+    assert_eq!(v.stages().len(), 3);
 }
 
 #[test]
@@ -221,4 +221,35 @@ fn cli_reports_errors_without_panicking() {
     let o = common::run(&["compile", p.to_str().unwrap(), "--out", d.path().join("out").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
     assert!(!d.path().join("out").exists(), "an invalid pipeline must not create outputs");
+}
+
+#[test]
+fn bake_stage_errors_name_the_field_or_the_file() {
+    let d = tempdir();
+    // Out-of-range parameters are rejected before anything runs, naming the field and the fix.
+    let p = write(
+        d.path(),
+        "bad.ron",
+        "(tables: [ZhResponse(id: \"zh\")], stages: [BakeLightmaps(id: \"b\", scene: \"x.gltf\", table: \"zh\", samples: 0, modes: [])])",
+    );
+    let o = common::run(&["check", p.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let t = text(&o);
+    assert!(t.contains("samples") && t.contains("modes"), "{t}");
+    // Full without a table is refused at validation, too.
+    let p = write(d.path(), "notable.ron", "(stages: [BakeLightmaps(id: \"b\", scene: \"x.gltf\")])");
+    let o = common::run(&["check", p.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("mode Full needs a table"), "{}", text(&o));
+    // A missing scene fails the run with the path in the message and leaves no lightmap behind.
+    let p = write(
+        d.path(),
+        "missing.ron",
+        "(stages: [BakeLightmaps(id: \"b\", scene: \"nowhere.gltf\", modes: [Surface])])",
+    );
+    let out = d.path().join("out");
+    let o = common::run(&["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("nowhere.gltf") && !text(&o).contains("panicked"), "{}", text(&o));
+    assert!(!out.join("b").join("lightmap_surface.exr").exists());
 }

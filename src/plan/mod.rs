@@ -545,6 +545,20 @@ impl Plan {
             .stages()
             .iter()
             .map(|s| match s.def() {
+                StageDef::BakeLightmaps(b) => match b.table_ref() {
+                    Some(t) if !tables.iter().any(|tp| tp.id == t && tp.def.is_some()) => StagePlan {
+                        id: s.id().to_string(),
+                        decision: Decision::Skip,
+                        reason: format!("its table {t} is skipped"),
+                        def: None,
+                    },
+                    _ => StagePlan {
+                        id: s.id().to_string(),
+                        decision: Decision::Compile,
+                        reason: format!("bakes {}", b.scene),
+                        def: Some(s.def().clone()),
+                    },
+                },
                 StageDef::PlotPhase(pp) => {
                     let table = tables.iter().find(|t| t.id == pp.table);
                     let kept: Option<Vec<f64>> = table.and_then(|t| match &t.def {

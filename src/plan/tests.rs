@@ -62,7 +62,11 @@ fn the_fog_room_keeps_its_emitters_g_bracket_and_distance_range() {
     let pruned = plan.pruned_pipeline(&p, &crate::pipeline::Limits::from_machine()).unwrap();
     let ids: Vec<&str> = pruned.tables().iter().map(|t| t.id()).collect();
     assert!(!ids.contains(&"ms_lobes_table2"));
-    assert_eq!(pruned.stages().len(), 1);
+    // The fog room's bake runs (its ZH table is kept); the two plots minus the skipped one.
+    let bake = stage("fog_room_bake");
+    assert_eq!((bake.decision, bake.reason.as_str()), (Decision::Compile, "bakes ../scenes/fog_room.gltf"));
+    let kept: Vec<&str> = pruned.stages().iter().map(|s| s.id()).collect();
+    assert_eq!(kept, ["fog_room_bake", "hg_extreme_plot"]);
 }
 
 #[test]

@@ -5,6 +5,7 @@
 //! of the right kind) and the output folder holding the compiled tables. Output: files in that
 //! folder, listed in a [`StageOutcome`].
 
+pub mod bake;
 pub mod plot_phase;
 
 use std::path::{Path, PathBuf};
@@ -19,6 +20,8 @@ use crate::tables::FieldIssue;
 pub enum StageDecl {
     /// Plots phase functions of a `PhaseHg` table to a PNG (log scale over angle).
     PlotPhase(plot_phase::PlotPhaseRaw),
+    /// Bakes lightmaps and probes of a scene with volume-to-surface transport (dubouchet2019).
+    BakeLightmaps(bake::BakeLightmapsRaw),
 }
 
 /// A resolved stage definition.
@@ -27,6 +30,19 @@ pub enum StageDecl {
 pub enum StageDef {
     /// See [`plot_phase`].
     PlotPhase(plot_phase::PlotPhase),
+    /// See [`bake`].
+    BakeLightmaps(bake::BakeLightmaps),
+}
+
+/// Where a stage runs.
+#[derive(Debug, Clone, Copy)]
+pub struct StageContext<'a> {
+    /// The output folder (compiled tables are read from it; results are written into it).
+    pub out_dir: &'a Path,
+    /// The folder of the pipeline file: relative paths in stage definitions (scenes) resolve against it.
+    pub base_dir: &'a Path,
+    /// Show progress bars (only on a terminal).
+    pub progress: bool,
 }
 
 /// What a stage wrote.
@@ -52,6 +68,16 @@ pub enum StageError {
         /// Why.
         message: String,
     },
+    /// The stage's inputs are unusable (a missing or broken scene, a table that cannot answer).
+    #[error("stage \"{stage}\": {message}\n  help: {help}")]
+    Input {
+        /// Stage id.
+        stage: String,
+        /// What is wrong.
+        message: String,
+        /// How to fix it.
+        help: String,
+    },
     /// Writing an output failed.
     #[error("stage \"{stage}\": cannot write {path}: {message}")]
     Output {
@@ -69,18 +95,21 @@ impl StageDecl {
     pub fn kind(&self) -> &'static str {
         match self {
             StageDecl::PlotPhase(_) => plot_phase::PlotPhaseRaw::KIND,
+            StageDecl::BakeLightmaps(_) => bake::BakeLightmapsRaw::KIND,
         }
     }
     /// The entry's id.
     pub fn id(&self) -> Option<&str> {
         match self {
             StageDecl::PlotPhase(r) => r.id.as_deref(),
+            StageDecl::BakeLightmaps(r) => r.id.as_deref(),
         }
     }
     /// Fills defaults.
     pub fn resolve(&self) -> StageDef {
         match self {
             StageDecl::PlotPhase(r) => StageDef::PlotPhase(r.resolve()),
+            StageDecl::BakeLightmaps(r) => StageDef::BakeLightmaps(r.resolve()),
         }
     }
 }
@@ -90,24 +119,50 @@ impl StageDef {
     pub fn kind(&self) -> &'static str {
         match self {
             StageDef::PlotPhase(_) => plot_phase::PlotPhaseRaw::KIND,
+            StageDef::BakeLightmaps(_) => bake::BakeLightmapsRaw::KIND,
         }
     }
     /// (field, referenced table id, required table kind) for every table this stage reads.
     pub fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
         match self {
             StageDef::PlotPhase(p) => vec![("table", p.table.clone(), crate::tables::phase_hg::PhaseHgRaw::KIND)],
+            StageDef::BakeLightmaps(b) => b
+                .table_ref()
+                .map(|t| ("table", t.to_string(), crate::tables::zh_response::ZhResponseRaw::KIND))
+                .into_iter()
+                .collect(),
         }
     }
     /// Range checks.
     pub fn validate(&self) -> Vec<FieldIssue> {
         match self {
             StageDef::PlotPhase(p) => p.validate(),
+            StageDef::BakeLightmaps(b) => b.validate(),
         }
     }
-    /// Runs the stage on tables compiled into `out_dir`.
-    pub fn run(&self, id: &str, out_dir: &Path) -> Result<StageOutcome, StageError> {
+    /// Scene files the stage reads, resolved against `base_dir` (the pipeline's folder).
+    pub fn scenes(&self, base_dir: &Path) -> Vec<PathBuf> {
         match self {
-            StageDef::PlotPhase(p) => p.run(id, out_dir),
+            StageDef::PlotPhase(_) => Vec::new(),
+            StageDef::BakeLightmaps(b) => vec![b.scene_path(base_dir)],
+        }
+    }
+    /// Error against run time for stages that have a reference (`voltab report --stages`): Markdown text,
+    /// or `None` for stages without one.
+    pub fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<Option<String>, StageError> {
+        match self {
+            StageDef::PlotPhase(_) => Ok(None),
+            StageDef::BakeLightmaps(b) => {
+                let r = b.report(id, ctx, report_dir, &bake::report::LadderOptions::default())?;
+                Ok(Some(bake::report::markdown(&r)))
+            }
+        }
+    }
+    /// Runs the stage on tables compiled into `ctx.out_dir`.
+    pub fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        match self {
+            StageDef::PlotPhase(p) => p.run(id, ctx.out_dir),
+            StageDef::BakeLightmaps(b) => b.run(id, ctx),
         }
     }
 }

@@ -1,0 +1,315 @@
+//! The scene's lights as the bake connects to them.
+//!
+//! **Input → output.** [`Scene::lights`] → [`BakeLights`]: *delta* lights (point, spot, directional),
+//! which a receiver connects to deterministically once per texel, and *area* lights (rect, disk, sphere,
+//! emissive meshes), which are sampled: one light chosen in proportion to its power, one point on it
+//! chosen uniformly by area. Each connection ends in a [`Source`], the emitter description the
+//! dubouchet2019 tables are queried with (Sec. 5: point/directional tables for those emitters, the
+//! differential-area table for area lights).
+//!
+//! **Conventions** (`docs/design/scene.md`): point and spot `radiance` is intensity \[W/sr\], directional
+//! is irradiance \[W/m²\] on a surface facing it, area lights and emissive meshes are radiance
+//! \[W/(m²·sr)\]. Spot cones use the glTF `KHR_lights_punctual` falloff: with
+//! `t = clamp((cos θ − cos θ_outer) / max(10⁻³, cos θ_inner − cos θ_outer), 0, 1)`, the intensity is
+//! scaled by `t²`. Rect and disk lights emit on the side of their normal only, spheres outward,
+//! emissive triangles on their front (counter-clockwise) side. A directional light's angular size is
+//! ignored (a delta direction).
+
+use crate::scene::{LightKind, Mesh, Scene};
+
+/// A point on an area light sampled by area: a differential patch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Patch {
+    /// Position \[m\].
+    pub position: [f64; 3],
+    /// Unit normal of the emitting side.
+    pub normal: [f64; 3],
+    /// Radiant intensity along the normal \[W/sr\] per channel: radiance × area ÷ probability of the
+    /// sample (light choice × point choice), so averaging over samples is unbiased.
+    pub intensity: [f64; 3],
+}
+
+/// What a receiver connects to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Source {
+    /// A point emitting `intensity` \[W/sr\] toward the receiver.
+    Point {
+        /// Position \[m\].
+        position: [f64; 3],
+        /// Intensity toward the receiver per channel.
+        intensity: [f64; 3],
+    },
+    /// Parallel light arriving from `toward` (unit), `irradiance` \[W/m²\] on a surface facing it.
+    Directional {
+        /// Unit direction from the receiver to the light.
+        toward: [f64; 3],
+        /// Irradiance per channel.
+        irradiance: [f64; 3],
+    },
+    /// A differential patch (an area-light sample, or a surface reflecting light).
+    Patch(Patch),
+}
+
+/// A delta light.
+#[derive(Debug, Clone, PartialEq)]
+enum Delta {
+    Point { position: [f64; 3], intensity: [f64; 3] },
+    Spot { position: [f64; 3], axis: [f64; 3], cos_outer: f64, scale: f64, intensity: [f64; 3] },
+    Directional { toward: [f64; 3], irradiance: [f64; 3] },
+}
+
+/// One sampleable area light.
+#[derive(Debug, Clone, PartialEq)]
+enum Shape {
+    Rect {
+        center: [f64; 3],
+        half_u: [f64; 3],
+        half_v: [f64; 3],
+        normal: [f64; 3],
+    },
+    Disk {
+        center: [f64; 3],
+        normal: [f64; 3],
+        radius: f64,
+    },
+    Sphere {
+        center: [f64; 3],
+        radius: f64,
+    },
+    /// Triangles (world positions, unit geometric normal) with their cumulative areas.
+    Triangles {
+        tris: Vec<WorldTriangle>,
+        cdf: Vec<f64>,
+    },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct Area {
+    shape: Shape,
+    area: f64,
+    radiance: [f64; 3],
+}
+
+/// The lights of a scene, prepared for connections.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BakeLights {
+    deltas: Vec<Delta>,
+    areas: Vec<Area>,
+    /// Cumulative selection probabilities of `areas` (proportional to power).
+    area_cdf: Vec<f64>,
+}
+
+/// Rec. 709 luminance weights: the power used to choose among area lights.
+pub const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+impl BakeLights {
+    /// Prepares `scene`'s lights. Lights with zero power, degenerate shapes or non-finite values are left
+    /// out (the scene checks have already warned about them).
+    pub fn new(scene: &Scene) -> BakeLights {
+        let mut out = BakeLights::default();
+        for light in &scene.lights {
+            let rgb = light.radiance;
+            if !rgb.iter().all(|c| c.is_finite() && *c >= 0.0) || rgb.iter().all(|&c| c == 0.0) {
+                continue;
+            }
+            match &light.kind {
+                LightKind::Point { position } => {
+                    out.deltas.push(Delta::Point { position: *position, intensity: rgb });
+                }
+                LightKind::Spot { position, direction, inner_cone, outer_cone } => {
+                    let Some(axis) = unit(*direction) else { continue };
+                    let (ci, co) = (inner_cone.cos(), outer_cone.cos());
+                    let scale = 1.0 / (ci - co).max(1e-3);
+                    out.deltas.push(Delta::Spot { position: *position, axis, cos_outer: co, scale, intensity: rgb });
+                }
+                LightKind::Directional { direction, .. } => {
+                    let Some(d) = unit(*direction) else { continue };
+                    out.deltas.push(Delta::Directional { toward: d.map(|c| -c), irradiance: rgb });
+                }
+                LightKind::Rect { center, half_u, half_v, normal } => {
+                    let area = 4.0 * norm(cross(*half_u, *half_v));
+                    if let Some(n) = unit(*normal) {
+                        out.push_area(
+                            Shape::Rect { center: *center, half_u: *half_u, half_v: *half_v, normal: n },
+                            area,
+                            rgb,
+                        );
+                    }
+                }
+                LightKind::Disk { center, normal, radius } => {
+                    if let Some(n) = unit(*normal) {
+                        let area = std::f64::consts::PI * radius * radius;
+                        out.push_area(Shape::Disk { center: *center, normal: n, radius: *radius }, area, rgb);
+                    }
+                }
+                LightKind::Sphere { center, radius } => {
+                    let area = 4.0 * std::f64::consts::PI * radius * radius;
+                    out.push_area(Shape::Sphere { center: *center, radius: *radius }, area, rgb);
+                }
+                LightKind::EmissiveMesh { mesh } => {
+                    if let Some(m) = scene.meshes.get(*mesh) {
+                        let (tris, cdf) = triangles(m);
+                        let area = cdf.last().copied().unwrap_or(0.0);
+                        out.push_area(Shape::Triangles { tris, cdf }, area, rgb);
+                    }
+                }
+            }
+        }
+        let total: f64 = out.areas.iter().map(power).sum();
+        let mut acc = 0.0;
+        out.area_cdf = out
+            .areas
+            .iter()
+            .map(|a| {
+                acc += power(a) / total;
+                acc
+            })
+            .collect();
+        if let Some(last) = out.area_cdf.last_mut() {
+            *last = 1.0;
+        }
+        out
+    }
+
+    fn push_area(&mut self, shape: Shape, area: f64, radiance: [f64; 3]) {
+        if area.is_finite() && area > 0.0 {
+            self.areas.push(Area { shape, area, radiance });
+        }
+    }
+
+    /// Whether there are area lights to sample.
+    pub fn has_area(&self) -> bool {
+        !self.areas.is_empty()
+    }
+
+    /// Number of delta lights.
+    pub fn delta_count(&self) -> usize {
+        self.deltas.len()
+    }
+
+    /// The delta lights as seen from `x`: point and spot lights as [`Source::Point`] (spot falloff
+    /// applied toward `x`; lights whose intensity toward `x` is 0 are left out), directional lights as
+    /// [`Source::Directional`].
+    pub fn deltas_toward(&self, x: [f64; 3], out: &mut Vec<Source>) {
+        out.clear();
+        for d in &self.deltas {
+            match d {
+                Delta::Point { position, intensity } => {
+                    out.push(Source::Point { position: *position, intensity: *intensity });
+                }
+                Delta::Spot { position, axis, cos_outer, scale, intensity } => {
+                    let Some(to_x) = unit(sub(x, *position)) else { continue };
+                    let t = ((dot(to_x, *axis) - cos_outer) * scale).clamp(0.0, 1.0);
+                    if t > 0.0 {
+                        out.push(Source::Point { position: *position, intensity: intensity.map(|c| c * t * t) });
+                    }
+                }
+                Delta::Directional { toward, irradiance } => {
+                    out.push(Source::Directional { toward: *toward, irradiance: *irradiance });
+                }
+            }
+        }
+    }
+
+    /// One area-light sample from uniforms `u` (light choice, two for the point); `None` without area
+    /// lights.
+    pub fn sample_area(&self, u: [f64; 3]) -> Option<Patch> {
+        let i = self.area_cdf.iter().position(|&c| u[0] < c).unwrap_or(self.areas.len().checked_sub(1)?);
+        let a = &self.areas[i];
+        let p_choice = self.area_cdf[i] - if i == 0 { 0.0 } else { self.area_cdf[i - 1] };
+        if p_choice <= 0.0 {
+            return None;
+        }
+        let (position, normal) = match &a.shape {
+            Shape::Rect { center, half_u, half_v, normal } => {
+                let (s, t) = (2.0 * u[1] - 1.0, 2.0 * u[2] - 1.0);
+                ([0, 1, 2].map(|c| center[c] + s * half_u[c] + t * half_v[c]), *normal)
+            }
+            Shape::Disk { center, normal, radius } => {
+                let (e1, e2) = frame(*normal);
+                let r = radius * u[1].sqrt();
+                let phi = 2.0 * std::f64::consts::PI * u[2];
+                let (a1, a2) = (r * phi.cos(), r * phi.sin());
+                ([0, 1, 2].map(|c| center[c] + a1 * e1[c] + a2 * e2[c]), *normal)
+            }
+            Shape::Sphere { center, radius } => {
+                let z = 1.0 - 2.0 * u[1];
+                let s = (1.0 - z * z).max(0.0).sqrt();
+                let phi = 2.0 * std::f64::consts::PI * u[2];
+                let n = [s * phi.cos(), s * phi.sin(), z];
+                ([0, 1, 2].map(|c| center[c] + radius * n[c]), n)
+            }
+            Shape::Triangles { tris, cdf } => {
+                let total = *cdf.last()?;
+                // Reuse u[0]'s position within the chosen light's interval for the triangle choice.
+                let lo = if i == 0 { 0.0 } else { self.area_cdf[i - 1] };
+                let v = ((u[0] - lo) / p_choice).clamp(0.0, 1.0) * total;
+                let k = cdf.partition_point(|&c| c <= v).min(tris.len() - 1);
+                let (p, n) = &tris[k];
+                let su = u[1].sqrt();
+                let (b1, b2) = (1.0 - su, u[2] * su);
+                ([0, 1, 2].map(|c| p[0][c] + b1 * (p[1][c] - p[0][c]) + b2 * (p[2][c] - p[0][c])), *n)
+            }
+        };
+        let w = a.area / p_choice;
+        Some(Patch { position, normal, intensity: a.radiance.map(|l| l * w) })
+    }
+}
+
+fn power(a: &Area) -> f64 {
+    a.area * (LUMINANCE[0] * a.radiance[0] + LUMINANCE[1] * a.radiance[1] + LUMINANCE[2] * a.radiance[2])
+}
+
+/// A world triangle and its unit geometric normal.
+type WorldTriangle = ([[f64; 3]; 3], [f64; 3]);
+
+/// World triangles of `m` with unit geometric normals (degenerate ones left out) and cumulative areas.
+fn triangles(m: &Mesh) -> (Vec<WorldTriangle>, Vec<f64>) {
+    let mut tris = Vec::new();
+    let mut cdf = Vec::new();
+    let mut acc = 0.0;
+    for t in &m.triangles {
+        let Some(p) =
+            t.iter().map(|&i| m.positions.get(i as usize).map(|v| v.map(f64::from))).collect::<Option<Vec<_>>>()
+        else {
+            continue;
+        };
+        let c = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+        let (Some(n), area) = (unit(c), 0.5 * norm(c)) else { continue };
+        acc += area;
+        tris.push(([p[0], p[1], p[2]], n));
+        cdf.push(acc);
+    }
+    (tris, cdf)
+}
+
+/// An orthonormal pair perpendicular to the unit vector `n`.
+pub fn frame(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    // Duff et al. 2017, "Building an orthonormal basis, revisited".
+    let s = 1f64.copysign(n[2]);
+    let a = -1.0 / (s + n[2]);
+    let b = n[0] * n[1] * a;
+    ([1.0 + s * n[0] * n[0] * a, s * b, -s * n[0]], [b, s + n[1] * n[1] * a, -n[1]])
+}
+
+pub(super) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+pub(super) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+pub(super) fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// `a / |a|`, or `None` for a zero or non-finite vector.
+pub(super) fn unit(a: [f64; 3]) -> Option<[f64; 3]> {
+    let n = norm(a);
+    (n > 0.0 && n.is_finite()).then(|| a.map(|c| c / n))
+}
