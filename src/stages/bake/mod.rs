@@ -253,27 +253,9 @@ impl BakeLightmaps {
             path: dir.clone(),
             message: e.to_string(),
         })?;
+        let Prepared { scene, bvh, table, atlas, points, import_ms, bvh_ms, table_ms, atlas_ms } =
+            self.prepare(id, ctx)?;
         let scene_path = self.scene_path(ctx.base_dir);
-        let t0 = Instant::now();
-        let scene =
-            Scene::load(&scene_path).map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
-        let import_ms = ms(t0);
-        let t0 = Instant::now();
-        let bvh = SceneBvh::build(&scene);
-        let bvh_ms = ms(t0);
-        let t0 = Instant::now();
-        let table = self.open_table(id, ctx, &scene)?;
-        let table_ms = if table.is_some() { ms(t0) } else { 0.0 };
-        let t0 = Instant::now();
-        let atlas_opts = atlas::AtlasOptions {
-            texels_per_metre: self.texels_per_metre,
-            min_size: self.min_size,
-            max_size: self.max_size,
-            padding: 2,
-        };
-        let atlas = atlas::build(&scene, &atlas_opts)
-            .map_err(|e| fail(e.to_string(), "add lightmap UVs to the scene's meshes"))?;
-        let atlas_ms = ms(t0);
         let mut outputs = Vec::new();
         let mut modes = Vec::new();
         let check_points = report::subset(&atlas, self.reference_texels as usize);
@@ -283,16 +265,6 @@ impl BakeLightmaps {
             let tr = Transport::new(&scene, &bvh, table.as_ref(), opts)
                 .map_err(|e| fail(e.to_string(), "check the table"))?;
             let t0 = Instant::now();
-            let points: Vec<TexelPoint> = atlas
-                .texels
-                .iter()
-                .map(|t| TexelPoint {
-                    position: t.position,
-                    normal: t.normal,
-                    geometric_normal: t.geometric_normal,
-                    cell: u64::from(t.pixel),
-                })
-                .collect();
             let est = bake_points(&tr, &points, ctx.progress, &format!("{id} {}", mode.name()))
                 .map_err(|e| fail(e.to_string(), "check the table's g range against the scene's media"))?;
             let trace_ms = ms(t0);
@@ -437,16 +409,7 @@ impl BakeLightmaps {
             |message: String| StageError::Input { stage: id.into(), message, help: "fix the stage's inputs".into() };
         let out =
             |path: &Path, message: String| StageError::Output { stage: id.into(), path: path.to_path_buf(), message };
-        let scene = Scene::load(&self.scene_path(ctx.base_dir)).map_err(|e| fail(e.to_string()))?;
-        let bvh = SceneBvh::build(&scene);
-        let table = self.open_table(id, ctx, &scene)?;
-        let atlas_opts = atlas::AtlasOptions {
-            texels_per_metre: self.texels_per_metre,
-            min_size: self.min_size,
-            max_size: self.max_size,
-            padding: 2,
-        };
-        let atlas = atlas::build(&scene, &atlas_opts).map_err(|e| fail(e.to_string()))?;
+        let Prepared { scene, bvh, table, atlas, .. } = self.prepare(id, ctx)?;
         let say = |m: &str| {
             if ctx.progress {
                 eprintln!("{m}");
@@ -469,26 +432,7 @@ impl BakeLightmaps {
     pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<Vec<crate::bench::BenchRow>, StageError> {
         let fail =
             |message: String| StageError::Input { stage: id.into(), message, help: "fix the stage's inputs".into() };
-        let scene = Scene::load(&self.scene_path(ctx.base_dir)).map_err(|e| fail(e.to_string()))?;
-        let bvh = SceneBvh::build(&scene);
-        let table = self.open_table(id, ctx, &scene)?;
-        let atlas_opts = atlas::AtlasOptions {
-            texels_per_metre: self.texels_per_metre,
-            min_size: self.min_size,
-            max_size: self.max_size,
-            padding: 2,
-        };
-        let atlas = atlas::build(&scene, &atlas_opts).map_err(|e| fail(e.to_string()))?;
-        let points: Vec<TexelPoint> = atlas
-            .texels
-            .iter()
-            .map(|t| TexelPoint {
-                position: t.position,
-                normal: t.normal,
-                geometric_normal: t.geometric_normal,
-                cell: u64::from(t.pixel),
-            })
-            .collect();
+        let Prepared { scene, bvh, table, atlas, points, .. } = self.prepare(id, ctx)?;
         let mut timed = Vec::new();
         for mode in [BakeMode::Surface, BakeMode::Shadow, BakeMode::Full] {
             let tr = Transport::new(&scene, &bvh, table.as_ref(), self.transport_options(mode))
@@ -546,6 +490,42 @@ impl BakeLightmaps {
             });
         }
         Ok(rows)
+    }
+
+    /// Imports the scene, builds its BVH, opens the table (when needed) and lays out the atlas, timing each.
+    fn prepare(&self, id: &str, ctx: &StageContext) -> Result<Prepared, StageError> {
+        let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
+        let t0 = Instant::now();
+        let scene = Scene::load(&self.scene_path(ctx.base_dir))
+            .map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
+        let import_ms = ms(t0);
+        let t0 = Instant::now();
+        let bvh = SceneBvh::build(&scene);
+        let bvh_ms = ms(t0);
+        let t0 = Instant::now();
+        let table = self.open_table(id, ctx, &scene)?;
+        let table_ms = if table.is_some() { ms(t0) } else { 0.0 };
+        let t0 = Instant::now();
+        let atlas_opts = atlas::AtlasOptions {
+            texels_per_metre: self.texels_per_metre,
+            min_size: self.min_size,
+            max_size: self.max_size,
+            padding: 2,
+        };
+        let atlas = atlas::build(&scene, &atlas_opts)
+            .map_err(|e| fail(e.to_string(), "add lightmap UVs to the scene's meshes"))?;
+        let points = atlas
+            .texels
+            .iter()
+            .map(|t| TexelPoint {
+                position: t.position,
+                normal: t.normal,
+                geometric_normal: t.geometric_normal,
+                cell: u64::from(t.pixel),
+            })
+            .collect();
+        let atlas_ms = ms(t0);
+        Ok(Prepared { scene, bvh, table, atlas, points, import_ms, bvh_ms, table_ms, atlas_ms })
     }
 
     /// The transport options of `mode`.
@@ -646,6 +626,20 @@ impl BakeLightmaps {
         outputs.push(path);
         Ok(positions.len())
     }
+}
+
+/// What every use of a bake stage (run, report, bench) starts from.
+struct Prepared {
+    scene: Scene,
+    bvh: SceneBvh,
+    table: Option<ZhResponseTable>,
+    atlas: atlas::Atlas,
+    /// One receiver per atlas texel.
+    points: Vec<TexelPoint>,
+    import_ms: f64,
+    bvh_ms: f64,
+    table_ms: f64,
+    atlas_ms: f64,
 }
 
 /// A receiver of the bake.

@@ -385,3 +385,45 @@ fn texels_inside_a_closed_opaque_box_see_only_what_is_inside() {
         assert_eq!(lid.irradiance, [0.0; 3], "{mode:?}");
     }
 }
+
+/// dubouchet2019 Fig. 8's failure case, measured: a binary density jump (a dense fog box, σ_s = 3 /m,
+/// albedo 1, inside the room's thin global fog) between the lights and the floor. The table sees each
+/// segment as homogeneous with its effective σ, so single and multiple scattering are approximate there.
+/// Run with `cargo test --release -- --ignored binary_density_jump --nocapture` to print the errors.
+#[test]
+#[ignore = "measurement (≈ 1 min): errors of every mode against volpath at a binary density jump"]
+fn binary_density_jump_error_against_the_reference() {
+    use crate::reference::volpath::{SurfacePoint, VolPathOptions, irradiance};
+    let mut s = room();
+    fog_box(&mut s, [1.0, 0.5, 1.0], [3.0, 1.5, 3.0], 3.0, 0.0);
+    let bvh = SceneBvh::build(&s);
+    let points: Vec<TexelPoint> = (0u32..64)
+        .map(|i| {
+            let (a, b) = (f64::from(i % 8), f64::from(i / 8));
+            TexelPoint {
+                position: [0.25 + 0.5 * a, 0.0, 0.25 + 0.5 * b],
+                normal: UP,
+                geometric_normal: UP,
+                cell: u64::from(i),
+            }
+        })
+        .collect();
+    let sp: Vec<SurfacePoint> = points.iter().map(|p| SurfacePoint { position: p.position, normal: UP }).collect();
+    let (truth, _) = irradiance(&s, &bvh, &sp, &VolPathOptions { samples: 16384, ..VolPathOptions::default() });
+    let truth: Vec<[f64; 3]> = truth.iter().map(|e| e.mean).collect();
+    let mut ratios = Vec::new();
+    for mode in [BakeMode::Surface, BakeMode::Shadow, BakeMode::Full] {
+        let tr = Transport::new(&s, &bvh, Some(table()), opts(mode, 512, 5)).unwrap();
+        let est: Vec<[f64; 3]> = bake_points(&tr, &points, false, "").unwrap().iter().map(|e| e.irradiance).collect();
+        let e = super::report::rel_rmse(&est, &truth);
+        let ratio = super::report::mean_luminance(&est) / super::report::mean_luminance(&truth);
+        eprintln!("binary density jump, {mode:?}: relative RMSE {e:.4}, mean ratio {ratio:.4}");
+        assert!(e.is_finite() && ratio.is_finite());
+        ratios.push(ratio);
+    }
+    // Shadow drops all scattered light, so it lies below the truth; Full's infinite-medium responses see
+    // the finite dense box as unbounded albedo-1 fog that returns all its light, so they overshoot
+    // (measured: Surface 2.12, Shadow 0.29, Full 2.13 × the reference mean). The failure is reported,
+    // not hidden: the truth is bracketed by the two modes.
+    assert!(ratios[1] < 1.0 && ratios[2] > 1.0, "{ratios:?}");
+}

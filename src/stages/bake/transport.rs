@@ -303,7 +303,7 @@ impl<'a> Transport<'a> {
             if !self.visible(x, to, t_max) {
                 continue;
             }
-            self.probe_connection(x, to, d, strength, unit_radiance, &emitter, 1.0, &mut sh, &mut add)?;
+            self.probe_connection(x, to, d, strength, unit_radiance, 1.0, &emitter, 1.0, &mut sh, &mut add)?;
         }
         let samples = self.opts.samples.max(1);
         let stream = self.stream(cell);
@@ -319,7 +319,7 @@ impl<'a> Transport<'a> {
                     let unit_radiance = (-dot(to, p.normal)).max(0.0) / (d * d);
                     let pos = [0, 1, 2].map(|c| x[c] + to[c] * d);
                     let emitter = Emitter::Area { intensity: 1.0, position: pos, normal: p.normal };
-                    self.probe_connection(x, to, d, p.intensity, unit_radiance, &emitter, w_s, &mut sh, &mut add)?;
+                    self.probe_connection(x, to, d, p.intensity, unit_radiance, 1.0, &emitter, w_s, &mut sh, &mut add)?;
                 }
             }
             if self.opts.bounces == 0 {
@@ -349,31 +349,16 @@ impl<'a> Transport<'a> {
             // dA = 4π r² / cos θ_y.
             let emitter = Emitter::Area { intensity: 1.0, position: yp, normal: ny };
             let scale = four_pi * d * d / cos_y;
-            self.probe_connection_split(x, dir, d, l_o, four_pi, scale, &emitter, w_s, &mut sh, &mut add)?;
+            self.probe_connection(x, dir, d, l_o, four_pi, scale, &emitter, w_s, &mut sh, &mut add)?;
         }
         Ok(sh)
     }
 
-    /// Adds one probe connection of unit radiance `unit_radiance` (times `strength`) in direction `to`.
+    /// Adds one probe connection in direction `to`: radiance `strength · unit_radiance` (times the
+    /// transmittance) as a weighted delta, and in Full mode the scattered radiance of the unit emitter times
+    /// `strength · scatter_scale`, all times the sample weight `w`.
     #[allow(clippy::too_many_arguments)]
     fn probe_connection(
-        &self,
-        x: [f64; 3],
-        to: [f64; 3],
-        length: f64,
-        strength: [f64; 3],
-        unit_radiance: f64,
-        emitter: &Emitter,
-        w: f64,
-        sh: &mut [[f64; PROBE_SH]; 3],
-        add: &mut impl FnMut([f64; 3], [f64; 3], &mut [[f64; PROBE_SH]; 3]),
-    ) -> Result<(), TransportError> {
-        self.probe_connection_split(x, to, length, strength, unit_radiance, 1.0, emitter, w, sh, add)
-    }
-
-    /// [`Self::probe_connection`] with the scattered part scaled by `scatter_scale` relative to the direct part.
-    #[allow(clippy::too_many_arguments)]
-    fn probe_connection_split(
         &self,
         x: [f64; 3],
         to: [f64; 3],
