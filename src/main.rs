@@ -387,6 +387,19 @@ fn bundled_scenes() -> Vec<PathBuf> {
     v
 }
 
+/// For stage ladders and benchmarks: the pipeline planned for the scenes its stages read, with those tables
+/// compiled into `tables` (cached); `None` when no stage reads a scene.
+fn compiled_for_stages(pipeline: &Path, tables: &Path, progress: bool) -> Result<Option<ValidatedPipeline>> {
+    let p = load(pipeline)?;
+    let scenes: Vec<PathBuf> = p.stages().iter().flat_map(|s| s.def().scenes(&base_dir(&p))).collect();
+    if scenes.is_empty() {
+        return Ok(None);
+    }
+    let p = planned(p, &scenes, true)?;
+    compile(&p, &CompileOptions { out_dir: tables.to_path_buf(), only: Vec::new(), jobs: None, progress })?;
+    Ok(Some(p))
+}
+
 /// The folder relative stage paths resolve against: the pipeline file's.
 fn base_dir(p: &ValidatedPipeline) -> PathBuf {
     p.path().parent().map(Path::to_path_buf).unwrap_or_default()
@@ -601,13 +614,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 print!("{}", voltab::report::markdown(&r));
                 println!("wrote {}/report.json, report.md and {} plots", out.display(), r.tables.len());
             }
-            // Stage ladders: compile what the stages' scenes need (cached), then measure.
-            let p = planned(load(&pipeline)?, &[], true)?;
-            let staged: Vec<_> = p.stages().iter().filter(|s| !s.def().scenes(&base_dir(&p)).is_empty()).collect();
-            if !staged.is_empty() {
-                let scenes: Vec<PathBuf> = staged.iter().flat_map(|s| s.def().scenes(&base_dir(&p))).collect();
-                let p = planned(load(&pipeline)?, &scenes, true)?;
-                compile(&p, &CompileOptions { out_dir: tables.clone(), only: Vec::new(), jobs: None, progress })?;
+            if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
                 let base = base_dir(&p);
                 let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
                 for s in p.stages() {
@@ -625,15 +632,13 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
         Command::Bench { pipeline, json, only, tables_only, rays, rays_only, bake, tables } => {
             let mut rows = Vec::new();
             if bake {
-                let p0 = load(&pipeline)?;
-                let scenes: Vec<PathBuf> = p0.stages().iter().flat_map(|s| s.def().scenes(&base_dir(&p0))).collect();
-                let p = planned(p0, &scenes, true)?;
-                compile(&p, &CompileOptions { out_dir: tables.clone(), only: Vec::new(), jobs: None, progress })?;
-                let base = base_dir(&p);
-                let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
-                for s in p.stages() {
-                    if let voltab::stages::StageDef::BakeLightmaps(b) = s.def() {
-                        rows.extend(b.bench(s.id(), &ctx)?);
+                if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
+                    let base = base_dir(&p);
+                    let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                    for s in p.stages() {
+                        if let voltab::stages::StageDef::BakeLightmaps(b) = s.def() {
+                            rows.extend(b.bench(s.id(), &ctx)?);
+                        }
                     }
                 }
             } else if !rays_only {
