@@ -166,6 +166,52 @@ impl PreparedLight {
         }
     }
 
+    /// Distance `t > 0` at which the ray `o + t·d` (unit `d`) meets the emitting side of an analytic
+    /// area light: the front (`⟨d, normal⟩ < 0`) of a rect (the parallelogram `center + a·half_u +
+    /// b·half_v`, `|a|, |b| ≤ 1`) or disk, or the outside of a sphere from a ray starting outside it.
+    /// `None` for every other kind (delta lights cannot be hit; emissive meshes are scene geometry).
+    pub fn hit_distance(&self, o: DVec3, d: DVec3) -> Option<f64> {
+        // The plane through `c` with normal `m`, met from the emitting side of `side`: distance and
+        // the point met relative to `c`.
+        let plane = |c: DVec3, m: DVec3, side: DVec3| -> Option<(f64, DVec3)> {
+            if d.dot(side).is_nan() || d.dot(side) >= 0.0 {
+                return None;
+            }
+            let t = (c - o).dot(m) / d.dot(m);
+            (t > 0.0 && t.is_finite()).then(|| (t, o + t * d - c))
+        };
+        let t = match &self.shape {
+            Shape::Rect { center, half_u, half_v, normal, .. } => {
+                // The parallelogram's own plane; `normal` only decides the emitting side.
+                let m = half_u.cross(*half_v);
+                let (t, q) = plane(*center, m, *normal)?;
+                let mm = m.length_squared();
+                let (a, b) = (q.cross(*half_v).dot(m) / mm, half_u.cross(q).dot(m) / mm);
+                (a.abs() <= 1.0 && b.abs() <= 1.0).then_some(t)?
+            }
+            Shape::Disk { center, normal, radius, .. } => {
+                let (t, q) = plane(*center, *normal, *normal)?;
+                (q.length_squared() <= radius * radius).then_some(t)?
+            }
+            Shape::Sphere { center, radius } => {
+                let rel = *center - o;
+                let b = rel.dot(d);
+                let c2 = rel.length_squared();
+                if c2 <= radius * radius || b <= 0.0 {
+                    return None;
+                }
+                let disc = radius * radius - (c2 - b * b);
+                if disc.is_nan() || disc < 0.0 {
+                    return None;
+                }
+                // Nearer root without cancellation: t = (c² − r²)/(b + √disc).
+                (c2 - radius * radius) / (b + disc.sqrt())
+            }
+            _ => return None,
+        };
+        (t > 0.0 && t.is_finite()).then_some(t)
+    }
+
     /// Total emitting area of an emissive mesh \[m²\] (`None` for other kinds).
     pub fn mesh_area(&self) -> Option<f64> {
         match &self.shape {

@@ -1,26 +1,36 @@
-//! One volumetric path from a receiver: the estimator behind [`super::irradiance`].
+//! One volumetric path from a receiver or an eye: the estimator behind [`super::irradiance`] and
+//! [`super::radiance`].
 //!
-//! **Input → output.** A receiver (point, unit normal), a [`SampleStream`] → one sample of the
-//! irradiance `E = ∫ L_i cos θ dω` per channel (unbiased; the mean over paths is the estimate).
+//! **Input → output.** A [`Start`] — a receiver (point, unit normal) or a camera ray (origin, unit
+//! direction) — and a [`SampleStream`] → one sample per channel of the irradiance
+//! `E = ∫ L_i cos θ dω` at the receiver, or of the radiance arriving along the camera ray (unbiased;
+//! the mean over paths is the estimate). Both run the same loop ([`Context::trace`]); only vertex 0
+//! differs.
 //!
-//! **Estimator.** The receiver is vertex 0 with "BSDF" `cos θ` (cosine sampling, weight `π`). At every
-//! vertex — the receiver, a Lambertian surface point (albedo `k`, BSDF `k/π`), a collision in a
-//! medium (HG phase) — next-event estimation to every light, then a direction from the BSDF or phase
-//! function and a free flight (`flight.rs`) to the next collision or surface. Emission is gathered
-//! two ways: next-event samples, and unidirectional hits on the front side of emissive meshes (the
-//! only emitters that are geometry). Both are combined with the balance heuristic, and the same
-//! heuristic handles chromatic media (hero-channel spectral MIS): the tracking channel `h` is drawn
-//! uniformly per path and every technique's pdf is kept per channel, so a path `x̄` ending with
-//! technique `t` contributes `f(x̄) / (⅓ Σ_c Σ_t' p_{c,t'}(x̄))` (the per-channel ratios `r_u`, `r_l`
-//! below are these pdfs divided by the hero's, renormalised at every vertex so they never
-//! overflow). The unidirectional pdf of an emitter hit includes the free-flight escape probability
-//! `T_c` of the last segment; the next-event pdf is the light's solid-angle pdf. Delta lights and the
-//! analytic area lights (rect, disk, sphere: not geometry, so never hit) are gathered by next-event
-//! estimation alone. For point and spot lights, next-event estimation at a leg's free-flight collision
-//! is balanced against a second estimate of the same single-collision integral from a distance
-//! sampled equiangularly along the leg (Kulla & Fajardo 2012, pdf `D/((θ_b − θ_a)(D² + (t − Δ)²))`),
-//! which cancels the `1/r²` of collisions near the light. Transmittance of shadow rays is exact
-//! ([`crate::scene::bvh::optical_thickness`]).
+//! **Estimator.** A receiver is vertex 0 with "BSDF" `cos θ` (cosine sampling, weight `π`); an eye is
+//! vertex 0 that gathers nothing and whose direction is given (probability 1 for every channel). At
+//! every other vertex — a Lambertian surface point (albedo `k`, BSDF `k/π`), a collision in a
+//! medium (HG phase) — and at a receiver: next-event estimation to every light, then a direction from
+//! the BSDF or phase function and a free flight (`flight.rs`) to the next collision or surface.
+//! Emission is gathered two ways: next-event samples, and unidirectional hits on the front side of
+//! emissive meshes (the only emitters that are geometry). Both are combined with the balance
+//! heuristic, and the same heuristic handles chromatic media (hero-channel spectral MIS): the
+//! tracking channel `h` is drawn uniformly per path and every technique's pdf is kept per channel, so
+//! a path `x̄` ending with technique `t` contributes `f(x̄) / (⅓ Σ_c Σ_t' p_{c,t'}(x̄))` (the
+//! per-channel ratios `r_u`, `r_l` below are these pdfs divided by the hero's, renormalised at every
+//! vertex so they never overflow). The unidirectional pdf of an emitter hit includes the free-flight
+//! escape probability `T_c` of the last segment; the next-event pdf is the light's solid-angle pdf; a
+//! hit on the eye's own ray or after a specular event has no next-event partner. Delta lights are
+//! gathered by next-event estimation alone. The analytic area lights (rect, disk, sphere) are not
+//! geometry (never occlude, never end a flight): they are gathered by next-event estimation from
+//! diffuse and medium vertices, and on flights no next-event sample can produce (the eye's ray, after
+//! a specular event) by a deterministic connection to where the flight's line meets their emitting
+//! side (`β_c L_c T_c / mean r`, [`Context::see_area_lights`]); each path to them is thus counted by
+//! exactly one technique. For point and spot lights, next-event estimation at a leg's free-flight
+//! collision is balanced against a second estimate of the same single-collision integral from a
+//! distance sampled equiangularly along the leg (Kulla & Fajardo 2012, pdf
+//! `D/((θ_b − θ_a)(D² + (t − Δ)²))`), which cancels the `1/r²` of collisions near the light.
+//! Transmittance of shadow rays is exact ([`crate::scene::bvh::optical_thickness`]).
 //!
 //! **Surfaces.** Lambertian with the material's `base_color` (no material: 0.8 grey), two-sided, with
 //! the geometric normal. Index-matched boundaries (a mesh bounding a medium whose material is missing
@@ -29,11 +39,17 @@
 //! probability `F`, else refract by Snell's law, total internal reflection included; radiance scales
 //! by `(η_from/η_to)²` when a traced ray crosses). Next-event rays cannot cross them: lights outside a
 //! refractive boundary reach its inside only through unidirectional paths ending on emissive meshes
-//! (point, spot, directional and analytic area lights do not light the inside at all).
+//! or analytic area lights (point, spot and directional lights do not light the inside at all).
 //!
-//! **Termination.** `max_depth` counts vertices after the receiver (scattering events, diffuse
-//! bounces and specular events); the last vertex still gathers emission both ways so the MIS pair is
-//! complete. Russian roulette from vertex `rr_depth` on, with survival `min(1, max_c w_c/π)`.
+//! **Termination.** Vertices are indexed from 0 (receiver or eye); each straight flight may produce
+//! the next index, each specular event takes one. `max_depth` counts vertices after the receiver, or
+//! after a camera ray's first event (which is vertex 1, so the limit is `max_depth + 1` there): a
+//! vertex up to the limit gathers by next-event estimation and scatters on; the flight leaving the
+//! last one still gathers emission (so the MIS pair is complete) but produces no vertex, takes no
+//! specular event and samples no equiangular distances. Russian roulette from vertex `rr_depth` on
+//! (`rr_depth + 1` for camera rays), with survival `min(1, max_c w_c/u)`, `u` the throughput of an
+//! unabsorbed path (`π` at a receiver, 1 from an eye). With `surface_bounces` off, flights end at
+//! surfaces after gathering their emission, except the eye's own flight.
 
 use std::f64::consts::PI;
 
@@ -84,9 +100,34 @@ impl Draws {
     }
 }
 
+/// Where a path starts.
+#[derive(Debug, Clone, Copy)]
+pub enum Start {
+    /// An irradiance receiver: position and unit normal (vertex 0, "BSDF" `cos θ`).
+    Receiver { x: DVec3, n: DVec3 },
+    /// A camera ray: origin and unit direction (vertex 0 is the eye, which gathers nothing itself).
+    Camera { origin: DVec3, dir: DVec3 },
+}
+
+/// Vertex-index limits of one path (see "Termination" in the module doc).
+#[derive(Debug, Clone, Copy)]
+struct Budget {
+    /// Highest index of a vertex that gathers by next-event estimation and scatters on.
+    max: u32,
+    /// Index from which Russian roulette applies.
+    rr: u32,
+    /// Whether vertex 0 is an eye: its flight meets surfaces even when `surface_bounces` is off.
+    camera: bool,
+    /// Throughput scale of a path with nothing absorbed: `π` from a receiver (its `cos θ` "BSDF" has
+    /// cosine-sampling weight `π`), 1 from an eye; Russian roulette survival is `max_c w_c` over it.
+    unit: f64,
+}
+
 /// A vertex where light is gathered and a direction sampled.
 #[derive(Debug, Clone, Copy)]
 enum Vertex {
+    /// The eye of a camera ray: origin and the given unit direction (no gathering, no sampling).
+    Camera { o: DVec3, d: DVec3 },
     /// Receiver or Lambertian point: position, ray origin (offset along the side normal), side
     /// normal, `k` (BSDF `k/π`).
     Surface { p: DVec3, o: DVec3, n: DVec3, k: [f64; 3] },
@@ -270,21 +311,34 @@ impl<'a> Context<'a> {
         Some(flight::depth(self.scene, &ray, &segs).map(|t| (-t).exp()))
     }
 
-    /// One path's irradiance sample at receiver `x` with unit normal `n`.
-    pub fn trace(&self, x: DVec3, n: DVec3, stream: SampleStream, rays: &mut u64) -> [f64; 3] {
+    /// One path's sample from `start`: irradiance at a receiver, or radiance arriving along a camera
+    /// ray (module doc). Both share this loop; only vertex 0 differs.
+    pub fn trace(&self, start: Start, stream: SampleStream, rays: &mut u64) -> [f64; 3] {
         let mut draws = Draws { stream, dim: 0 };
         let hero = ((draws.next() * 3.0) as usize).min(2);
         let mut st = State { hero, beta: [1.0; 3], r_u: [1.0; 3] };
         let mut out = [0.0; 3];
-        let mut vertex = Vertex::Surface { p: x, o: x + n * self.eps(x), n, k: [PI; 3] };
+        // A camera path's vertex 0 is the eye, so its user-facing vertex indices start at 1.
+        let (mut vertex, camera) = match start {
+            Start::Receiver { x, n } => (Vertex::Surface { p: x, o: x + n * self.eps(x), n, k: [PI; 3] }, false),
+            Start::Camera { origin, dir } => (Vertex::Camera { o: origin, d: dir }, true),
+        };
+        let off = u32::from(camera);
+        let budget = Budget {
+            max: self.opts.max_depth.saturating_add(off),
+            rr: self.opts.rr_depth.saturating_add(off),
+            camera,
+            unit: if camera { 1.0 } else { PI },
+        };
         let mut depth = 0u32;
         loop {
             self.next_event(&vertex, &st, &mut draws, &mut out, rays);
-            let last = depth >= self.opts.max_depth;
             // Direction sampling: throughput and per-channel pdf ratios.
             let (u1, u2) = (draws.next(), draws.next());
             let r_prefix = st.r_u;
             let (origin, dir, p_dir_hero) = match vertex {
+                // The given ray: probability 1 for every channel, and no light sample can produce it.
+                Vertex::Camera { o, d } => (o, d, f64::INFINITY),
                 Vertex::Surface { o, n, k, .. } => {
                     let (t1, t2) = lights::frame(n);
                     let r = u1.sqrt();
@@ -316,9 +370,9 @@ impl<'a> Context<'a> {
             }
             // Russian roulette on the MIS-weighted throughput.
             let xi_rr = draws.next();
-            if depth >= self.opts.rr_depth {
+            if depth >= budget.rr {
                 let w = st.beta.iter().fold(0.0f64, |m, &b| m.max(b)) / State::mean(st.r_u);
-                let q = (w / PI).min(1.0);
+                let q = (w / budget.unit).min(1.0);
                 if q.is_nan() || q <= 0.0 || xi_rr >= q {
                     return out;
                 }
@@ -327,9 +381,9 @@ impl<'a> Context<'a> {
             // Next-event pdf ratios of the coming emitter hit (per unit light pdf, before escape).
             let r_l = r_prefix.map(|r| r / p_dir_hero);
             let leg = Leg { origin, dir, t_end: f64::INFINITY, scale: st.r_u };
-            match self.flight(leg, &mut st, r_l, last, &mut draws, &mut out, &mut depth, rays) {
-                Some(v) if !last => vertex = v,
-                _ => return out,
+            match self.flight(leg, &mut st, r_l, budget, &mut draws, &mut out, &mut depth, rays) {
+                Some(v) => vertex = v,
+                None => return out,
             }
             if st.beta.iter().all(|&b| b == 0.0) {
                 return out;
@@ -343,12 +397,13 @@ impl<'a> Context<'a> {
 
     /// Next-event estimation to every light from `vertex`.
     fn next_event(&self, vertex: &Vertex, st: &State, draws: &mut Draws, out: &mut [f64; 3], rays: &mut u64) {
+        let (p, o) = match *vertex {
+            Vertex::Camera { .. } => return, // the eye gathers only along its given ray
+            Vertex::Surface { p, o, .. } => (p, o),
+            Vertex::Medium { p, .. } => (p, p),
+        };
         for light in &self.lights {
             let (u, v) = (draws.next(), draws.next());
-            let (p, o) = match *vertex {
-                Vertex::Surface { p, o, .. } => (p, o),
-                Vertex::Medium { p, .. } => (p, p),
-            };
             let Some(s) = light.sample(p, u, v) else { continue };
             if s.value.iter().all(|&x| x.is_nan() || x <= 0.0) {
                 continue;
@@ -367,6 +422,7 @@ impl<'a> Context<'a> {
                     let ph = g.map(|gc| hg_phase(mu, gc));
                     (ph, ph)
                 }
+                Vertex::Camera { .. } => return,
             };
             if f.iter().all(|&x| x.is_nan() || x <= 0.0) {
                 continue;
@@ -401,22 +457,27 @@ impl<'a> Context<'a> {
     }
 
     /// Flies from `origin` along `dir` through index-matched boundaries and specular events; gathers
-    /// emitter hits; returns the next diffuse or medium vertex, or `None` when the path ends.
+    /// emitter hits; returns the next diffuse or medium vertex, or `None` when the path ends (also
+    /// when that vertex's index would exceed `budget.max`: it has then only gathered emission).
     #[allow(clippy::too_many_arguments)]
     fn flight(
         &self,
         leg: Leg,
         st: &mut State,
         mut r_l: [f64; 3],
-        last: bool,
+        budget: Budget,
         draws: &mut Draws,
         out: &mut [f64; 3],
         depth: &mut u32,
         rays: &mut u64,
     ) -> Option<Vertex> {
         let (mut origin, mut dir) = (leg.origin, leg.dir);
+        // The eye's own flight meets surfaces whatever `surface_bounces` says: they are what it sees.
+        let surfaces = self.opts.surface_bounces || (budget.camera && *depth == 0);
         *depth += 1;
         loop {
+            // `*depth` is the index of the vertex this straight flight may produce.
+            let last = *depth > budget.max;
             let ray = Ray { origin: origin.to_array(), direction: dir.to_array(), t_min: 0.0, t_max: f64::INFINITY };
             let hit = self.closest(&ray, rays);
             let t_end = hit.map_or(f64::INFINITY, |h| h.t);
@@ -433,6 +494,10 @@ impl<'a> Context<'a> {
             if !last {
                 self.equiangular(&leg, &segs, st, draws, out, rays);
             }
+            if r_l.iter().all(|&r| r == 0.0) {
+                // No light sample can produce this flight (the eye's ray, or after a specular event).
+                self.see_area_lights(&leg, &segs, st, out);
+            }
             if let Some(c) = collision {
                 let sh = c.sigma_t[h];
                 if !(sh > 0.0 && sh.is_finite()) {
@@ -444,7 +509,7 @@ impl<'a> Context<'a> {
                 st.r_u = [0, 1, 2].map(|k| st.r_u[k] * c.sigma_t[k] * ratio(k) / sh);
                 let g = self.scene.media[c.medium].g;
                 let leg = Leg { scale: leg.scale.map(|r| r * th_inv / sh), ..leg };
-                return Some(Vertex::Medium { p: origin + c.t * dir, d_in: dir, g, leg });
+                return (!last).then_some(Vertex::Medium { p: origin + c.t * dir, d_in: dir, g, leg });
             }
             // Escaped the media up to the hit (or to infinity): weight T_c / T_h.
             let ratio = |k: usize| exp_capped(tau[h] - tau[k]);
@@ -458,20 +523,18 @@ impl<'a> Context<'a> {
             if hit.front_face {
                 self.gather_emission(&hit, dir, ng, st, r_l, out);
             }
-            if !self.opts.surface_bounces {
+            if !surfaces {
                 return None;
             }
             let side = if dir.dot(ng) < 0.0 { ng } else { -ng };
             match self.kinds[hit.mesh] {
                 SurfaceKind::Lambert(k) => {
-                    return Some(Vertex::Surface { p, o: p + side * self.eps(p), n: side, k });
+                    return (!last).then_some(Vertex::Surface { p, o: p + side * self.eps(p), n: side, k });
                 }
                 SurfaceKind::PassThrough => return None, // `closest` never reports these
+                SurfaceKind::Dielectric(_) if last => return None,
                 SurfaceKind::Dielectric(ior) => {
                     *depth += 1;
-                    if *depth > self.opts.max_depth + 1 {
-                        return None;
-                    }
                     let (eta_from, eta_to) = if hit.front_face { (1.0, ior) } else { (ior, 1.0) };
                     let xi = draws.next();
                     let cos_i = -dir.dot(side);
@@ -519,13 +582,7 @@ impl<'a> Context<'a> {
             let Some(medium) = seg.medium.and_then(|i| self.scene.media.get(i)) else { continue };
             let x = leg.origin + t * leg.dir;
             let rho = flight::density_at(&medium.density, x);
-            let ray = Ray { origin: leg.origin.to_array(), direction: leg.dir.to_array(), t_min: 0.0, t_max: t };
-            let upto: Vec<MediumSegment> = segs
-                .iter()
-                .filter(|s| s.t0 < t)
-                .map(|s| MediumSegment { t0: s.t0, t1: s.t1.min(t), medium: s.medium })
-                .collect();
-            let tau = flight::depth(self.scene, &ray, &upto);
+            let tau = self.depth_to(leg, segs, t);
             let Some(s) = light.sample(x, u, v) else { continue };
             let mu = leg.dir.dot(s.dir);
             let f = medium.g.map(|g| hg_phase(mu, g));
@@ -534,6 +591,39 @@ impl<'a> Context<'a> {
             let denom = State::mean([0, 1, 2].map(|c| leg.scale[c] * (medium.sigma_t()[c] * rho * trans[c] + pe)));
             for (c, o) in out.iter_mut().enumerate() {
                 let add = st.beta[c] * medium.sigma_s[c] * rho * trans[c] * f[c] * tr[c] * s.value[c] / denom;
+                if add > 0.0 {
+                    *o += add;
+                }
+            }
+        }
+    }
+
+    /// Per-channel optical depth along `leg` from its origin to distance `t` (`segs`: the leg's media).
+    fn depth_to(&self, leg: &Leg, segs: &[MediumSegment], t: f64) -> [f64; 3] {
+        let ray = Ray { origin: leg.origin.to_array(), direction: leg.dir.to_array(), t_min: 0.0, t_max: t };
+        let upto: Vec<MediumSegment> = segs
+            .iter()
+            .filter(|s| s.t0 < t)
+            .map(|s| MediumSegment { t0: s.t0, t1: s.t1.min(t), medium: s.medium })
+            .collect();
+        flight::depth(self.scene, &ray, &upto)
+    }
+
+    /// Adds the radiance of the analytic area lights (rect, disk, sphere) whose emitting side `leg`
+    /// meets before its end, on a flight no next-event sample can produce (so no MIS partner). The
+    /// light's point is a deterministic extension of the path (probability 1 for every tracking
+    /// channel), so the hero-channel MIS estimate is `β_c L_c T_c / mean_c' r_c'` with `T_c` the
+    /// transmittance to the light, whatever the free flight does (exact on the eye's own ray).
+    fn see_area_lights(&self, leg: &Leg, segs: &[MediumSegment], st: &State, out: &mut [f64; 3]) {
+        let denom = State::mean(st.r_u);
+        if !(denom > 0.0 && denom.is_finite()) {
+            return;
+        }
+        for light in &self.lights {
+            let Some(t) = light.hit_distance(leg.origin, leg.dir).filter(|&t| t < leg.t_end) else { continue };
+            let trans = if segs.is_empty() { [1.0; 3] } else { self.depth_to(leg, segs, t).map(|x| (-x).exp()) };
+            for (c, o) in out.iter_mut().enumerate() {
+                let add = st.beta[c] * light.radiance[c] * trans[c] / denom;
                 if add > 0.0 {
                     *o += add;
                 }

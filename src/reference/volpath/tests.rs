@@ -23,16 +23,16 @@ fn pt(position: [f64; 3], normal: [f64; 3]) -> SurfacePoint {
     SurfacePoint { position, normal }
 }
 
-fn homogeneous(sigma_s: [f64; 3], sigma_a: [f64; 3], g: [f64; 3]) -> Medium {
+pub(super) fn homogeneous(sigma_s: [f64; 3], sigma_a: [f64; 3], g: [f64; 3]) -> Medium {
     Medium { name: "Fog".into(), sigma_s, sigma_a, g, density: Density::Homogeneous, boundary: Boundary::Global }
 }
 
-fn material(albedo: f64, emission: f64, surface: Surface) -> Material {
+pub(super) fn material(albedo: f64, emission: f64, surface: Surface) -> Material {
     Material { name: "M".into(), base_color: [albedo; 3], emission: [emission; 3], surface, roughness: 1.0 }
 }
 
 /// `|a − b| ≤ rel · |b|` per channel.
-fn close(a: [f64; 3], b: [f64; 3], rel: f64) -> bool {
+pub(super) fn close(a: [f64; 3], b: [f64; 3], rel: f64) -> bool {
     (0..3).all(|c| (a[c] - b[c]).abs() <= rel * b[c].abs())
 }
 
@@ -71,7 +71,7 @@ fn point_light_in_vacuum_is_inverse_square() {
 /// contour integral of the projected solid angle (Lambert) gives
 /// `π F = ½ [X/√(1+X²) atan(Y/√(1+X²)) + Y/√(1+Y²) atan(X/√(1+Y²))]`, `X = a/h`, `Y = b/h`, so
 /// `E = 4 L π F`. Check: `a, b → ∞` gives `E → π L`.
-fn rect_on_axis(l: f64, a: f64, b: f64, h: f64) -> f64 {
+pub(super) fn rect_on_axis(l: f64, a: f64, b: f64, h: f64) -> f64 {
     let (x, y) = (a / h, b / h);
     let (sx, sy) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
     2.0 * l * (x / sx * (y / sx).atan() + y / sy * (x / sy).atan())
@@ -177,12 +177,9 @@ fn scattering_point_light_matches_photon_walk() {
     }
 }
 
-/// Closed box whose inside walls are black (albedo 0) and emit `L` inward, filled with a
-/// non-absorbing medium: the radiance field is uniform, `L` everywhere in every direction (scattering
-/// with albedo 1 maps a uniform field onto itself), so every wall point receives `E = π L` exactly.
-#[test]
-fn emissive_box_with_conservative_medium_is_a_furnace() {
-    let l = 1.5;
+/// The unit cube with black, inward-facing walls emitting `l`, filled with a chromatic non-absorbing
+/// global medium (σ_s 0.5, 2, 4 /m; g 0, 0.5, −0.3).
+pub(super) fn furnace_box(l: f64) -> Scene {
     let mut s = empty("furnace.usda");
     s.materials.push(material(0.0, l, Surface::Opaque));
     let mut bx: Mesh = cuboid("Box", [0.0; 3], [1.0, 1.0, 1.0]);
@@ -193,6 +190,16 @@ fn emissive_box_with_conservative_medium_is_a_furnace() {
     s.meshes.push(bx);
     s.lights.push(Light { name: "Box".into(), kind: LightKind::EmissiveMesh { mesh: 0 }, radiance: [l; 3] });
     s.media.push(homogeneous([0.5, 2.0, 4.0], [0.0; 3], [0.0, 0.5, -0.3]));
+    s
+}
+
+/// Closed box whose inside walls are black (albedo 0) and emit `L` inward, filled with a
+/// non-absorbing medium: the radiance field is uniform, `L` everywhere in every direction (scattering
+/// with albedo 1 maps a uniform field onto itself), so every wall point receives `E = π L` exactly.
+#[test]
+fn emissive_box_with_conservative_medium_is_a_furnace() {
+    let l = 1.5;
+    let s = furnace_box(l);
     let points = [pt([0.5, 0.0, 0.5], [0.0, 1.0, 0.0]), pt([0.0, 0.3, 0.8], [1.0, 0.0, 0.0])];
     let exact = PI * l;
     for media in [false, true] {
