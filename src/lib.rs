@@ -35,6 +35,7 @@ pub mod bench;
 pub mod cache;
 pub mod compile;
 pub mod container;
+pub mod effects;
 pub mod image_io;
 pub mod physics;
 pub mod pipeline;
