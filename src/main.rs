@@ -160,6 +160,11 @@ enum Command {
         /// mode, the Full/Surface overhead, and the speed-up over volumetric path tracing at equal error.
         #[arg(long)]
         bake: bool,
+        /// Only the real-time effect benchmarks of the pipeline's EpipolarShadows and ImageFog stages: the
+        /// epipolar speed-up over ray marching at equal error (1 and 2 threads) and the time-vs-resolution
+        /// slopes; fog frame times at 720p and 1080p and the speed-up over the gathering reference.
+        #[arg(long)]
+        effects: bool,
         /// Where the bake's tables are compiled (cached).
         #[arg(long, default_value = "out")]
         tables: PathBuf,
@@ -621,7 +626,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                     if let Some(md) = s.def().report(s.id(), &ctx, &out)? {
                         print!("{md}");
                         println!(
-                            "wrote {}/{}-lightmap.json, .md and -lightmap-error-vs-time.png",
+                            "wrote {}/{}-* (Markdown, JSON where available, error-vs-time plot)",
                             out.display(),
                             s.id()
                         );
@@ -629,7 +634,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 }
             }
         }
-        Command::Bench { pipeline, json, only, tables_only, rays, rays_only, bake, tables } => {
+        Command::Bench { pipeline, json, only, tables_only, rays, rays_only, bake, effects, tables } => {
             let mut rows = Vec::new();
             if bake {
                 if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
@@ -640,6 +645,21 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                             rows.extend(b.bench(s.id(), &ctx)?);
                         }
                     }
+                }
+            } else if effects {
+                let p = load(&pipeline)?;
+                let base = base_dir(&p);
+                let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                for s in p.stages() {
+                    let (text, r) = match s.def() {
+                        voltab::stages::StageDef::EpipolarShadows(e) => e.bench(s.id(), &ctx)?,
+                        voltab::stages::StageDef::ImageFog(f) => f.bench(s.id(), &ctx)?,
+                        _ => continue,
+                    };
+                    if !json {
+                        println!("{text}");
+                    }
+                    rows.extend(r);
                 }
             } else if !rays_only {
                 let p = load(&pipeline)?;

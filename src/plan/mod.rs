@@ -559,6 +559,18 @@ impl Plan {
                         def: Some(s.def().clone()),
                     },
                 },
+                StageDef::EpipolarShadows(e) => StagePlan {
+                    id: s.id().to_string(),
+                    decision: Decision::Compile,
+                    reason: format!("renders god rays of {}", e.scene),
+                    def: Some(s.def().clone()),
+                },
+                StageDef::ImageFog(f) => StagePlan {
+                    id: s.id().to_string(),
+                    decision: Decision::Compile,
+                    reason: format!("renders image-space fog of {}", f.scene),
+                    def: Some(s.def().clone()),
+                },
                 StageDef::PlotPhase(pp) => {
                     let table = tables.iter().find(|t| t.id == pp.table);
                     let kept: Option<Vec<f64>> = table.and_then(|t| match &t.def {

@@ -6,7 +6,10 @@
 //! folder, listed in a [`StageOutcome`].
 
 pub mod bake;
+pub mod god_rays;
+pub mod image_fog;
 pub mod plot_phase;
+pub mod view;
 
 use std::path::{Path, PathBuf};
 
@@ -22,6 +25,10 @@ pub enum StageDecl {
     PlotPhase(plot_phase::PlotPhaseRaw),
     /// Bakes lightmaps and probes of a scene with volume-to-surface transport (dubouchet2019).
     BakeLightmaps(bake::BakeLightmapsRaw),
+    /// Renders god rays (shadowed single scattering) of a scene with epipolar partial-sum trees (baran2010).
+    EpipolarShadows(god_rays::EpipolarShadowsRaw),
+    /// Applies image-space multiple-scattering fog to a view of a scene (iser2018).
+    ImageFog(image_fog::ImageFogRaw),
 }
 
 /// A resolved stage definition.
@@ -32,6 +39,10 @@ pub enum StageDef {
     PlotPhase(plot_phase::PlotPhase),
     /// See [`bake`].
     BakeLightmaps(bake::BakeLightmaps),
+    /// See [`god_rays`].
+    EpipolarShadows(god_rays::EpipolarShadows),
+    /// See [`image_fog`].
+    ImageFog(image_fog::ImageFogStage),
 }
 
 /// Where a stage runs.
@@ -96,6 +107,8 @@ impl StageDecl {
         match self {
             StageDecl::PlotPhase(_) => plot_phase::PlotPhaseRaw::KIND,
             StageDecl::BakeLightmaps(_) => bake::BakeLightmapsRaw::KIND,
+            StageDecl::EpipolarShadows(_) => god_rays::EpipolarShadowsRaw::KIND,
+            StageDecl::ImageFog(_) => image_fog::ImageFogRaw::KIND,
         }
     }
     /// The entry's id.
@@ -103,6 +116,8 @@ impl StageDecl {
         match self {
             StageDecl::PlotPhase(r) => r.id.as_deref(),
             StageDecl::BakeLightmaps(r) => r.id.as_deref(),
+            StageDecl::EpipolarShadows(r) => r.id.as_deref(),
+            StageDecl::ImageFog(r) => r.id.as_deref(),
         }
     }
     /// Fills defaults.
@@ -110,6 +125,8 @@ impl StageDecl {
         match self {
             StageDecl::PlotPhase(r) => StageDef::PlotPhase(r.resolve()),
             StageDecl::BakeLightmaps(r) => StageDef::BakeLightmaps(r.resolve()),
+            StageDecl::EpipolarShadows(r) => StageDef::EpipolarShadows(r.resolve()),
+            StageDecl::ImageFog(r) => StageDef::ImageFog(r.resolve()),
         }
     }
 }
@@ -120,6 +137,8 @@ impl StageDef {
         match self {
             StageDef::PlotPhase(_) => plot_phase::PlotPhaseRaw::KIND,
             StageDef::BakeLightmaps(_) => bake::BakeLightmapsRaw::KIND,
+            StageDef::EpipolarShadows(_) => god_rays::EpipolarShadowsRaw::KIND,
+            StageDef::ImageFog(_) => image_fog::ImageFogRaw::KIND,
         }
     }
     /// (field, referenced table id, required table kind) for every table this stage reads.
@@ -131,6 +150,7 @@ impl StageDef {
                 .map(|t| ("table", t.to_string(), crate::tables::zh_response::ZhResponseRaw::KIND))
                 .into_iter()
                 .collect(),
+            StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) => Vec::new(),
         }
     }
     /// Range checks.
@@ -138,6 +158,8 @@ impl StageDef {
         match self {
             StageDef::PlotPhase(p) => p.validate(),
             StageDef::BakeLightmaps(b) => b.validate(),
+            StageDef::EpipolarShadows(e) => e.validate(),
+            StageDef::ImageFog(f) => f.validate(),
         }
     }
     /// Scene files the stage reads, resolved against `base_dir` (the pipeline's folder).
@@ -145,6 +167,8 @@ impl StageDef {
         match self {
             StageDef::PlotPhase(_) => Vec::new(),
             StageDef::BakeLightmaps(b) => vec![b.scene_path(base_dir)],
+            StageDef::EpipolarShadows(e) => vec![e.scene_path(base_dir)],
+            StageDef::ImageFog(f) => vec![f.scene_path(base_dir)],
         }
     }
     /// Error against run time for stages that have a reference (`voltab report --stages`): Markdown text,
@@ -156,6 +180,8 @@ impl StageDef {
                 let r = b.report(id, ctx, report_dir, &bake::report::LadderOptions::default())?;
                 Ok(Some(bake::report::markdown(&r)))
             }
+            StageDef::EpipolarShadows(e) => e.report(id, ctx, report_dir).map(Some),
+            StageDef::ImageFog(f) => f.report(id, ctx, report_dir).map(Some),
         }
     }
     /// Runs the stage on tables compiled into `ctx.out_dir`.
@@ -163,6 +189,8 @@ impl StageDef {
         match self {
             StageDef::PlotPhase(p) => p.run(id, ctx.out_dir),
             StageDef::BakeLightmaps(b) => b.run(id, ctx),
+            StageDef::EpipolarShadows(e) => e.run(id, ctx),
+            StageDef::ImageFog(f) => f.run(id, ctx),
         }
     }
 }

@@ -1,0 +1,433 @@
+//! `ImageFog`: scene → iser2018 image-space quasi-heterogeneous fog (analytic density integrals,
+//! hierarchical MIP filtering of multiple scattering) as EXR + PNG, with optional comparisons against
+//! the gathering filter and against brute-force volumetric path tracing.
+//!
+//! **Input.** A scene file (relative to the pipeline file) with a perspective camera and global media
+//! (homogeneous or exponential height fog, summed). **Phases.** Import → BVH → G-buffer of the camera
+//! ([`view`](super::view): vacuum colour and distance) → [`image_fog::render`] (per-pixel density
+//! integrals P and spread W, Secs. 3.3 and Eqs. 1, 3; attenuated and scattered images, Sec. 4.1; MIP
+//! chain of the scattered image with the 4-tap Gaussian and level selection, Sec. 4.2; spread-space
+//! chain, masking, Sec. 4.3) → `<out>/<stage>/fog.exr` (layers `attenuated`, `scattered`) with PNG
+//! previews and `summary.json`.
+//!
+//! **Checks** (in `summary.json`). With `gather_pixels > 0`, the scattered image against the gathering
+//! reference (spatially varying Gaussian) on a stratified grid of that many pixels, and the gather's
+//! full-frame time extrapolated per pixel. With `reference_samples > 0`, the physics: at
+//! `reference_width` pixels wide, a vacuum image and a fogged image are both path traced
+//! ([`volpath::radiance`]: multiple scattering, surfaces with the same `reference_depth`), the effect is
+//! applied to the vacuum image, and the relative RMSE of the attenuation-only fog and of the full effect
+//! against the path-traced fog is reported — how much closer multiple scattering gets.
+
+use std::path::Path;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use super::view::{self, ViewFields, ms};
+use super::{StageContext, StageError, StageOutcome};
+use crate::bench::BenchRow;
+use crate::effects::image_fog::{self, FogMedium, FogOptions, LevelRule};
+use crate::effects::{Image, RgbImage, ViewCamera};
+use crate::reference::volpath::{self, CameraRay, VolPathOptions};
+use crate::report::plot::{Plot, Scale, Series, write_png};
+use crate::scene::Scene;
+use crate::scene::bvh::SceneBvh;
+use crate::tables::FieldIssue;
+
+crate::declare_params! {
+    /// Apply iser2018 image-space multiple-scattering fog to a camera view of a scene.
+    raw ImageFogRaw => resolved ImageFogStage, kind "ImageFog" {
+        /// Scene file (.gltf, .glb, .usda, .usdc, .usd, .usdz), relative to the pipeline file.
+        scene: String = String::new(), unit = "", range = "path to a scene file";
+        /// Index of the scene camera to render.
+        camera: u32 = 0, unit = "", range = "0 to the scene's camera count - 1";
+        /// Image width.
+        width: u32 = 1280, unit = "px", range = "1 to 8192";
+        /// Image height.
+        height: u32 = 720, unit = "px", range = "1 to 8192";
+        /// Paths per pixel of the vacuum colour buffer (direct light at the first hit).
+        colour_samples: u32 = 16, unit = "paths", range = "1 to 65536";
+        /// MIP levels above level 0 (0: down to 1×1).
+        levels: u32 = 0, unit = "levels", range = "0 to 16";
+        /// Use the paper's level rule k = log2(W/c) instead of variance matching.
+        paper_levels: bool = false, unit = "", range = "true or false";
+        /// Mask small-spread pixels out of coarser levels (Sec. 4.3).
+        masking: bool = true, unit = "", range = "true or false";
+        /// Pixels (a stratified grid) on which the filter is compared with the gathering reference (0: none).
+        gather_pixels: u32 = 0, unit = "px", range = "0 to 1000000";
+        /// Paths per pixel of the path-traced physics comparison (0: none).
+        reference_samples: u32 = 0, unit = "paths", range = "0 to 1000000";
+        /// Width of the path-traced comparison's images (height keeps the aspect ratio).
+        reference_width: u32 = 160, unit = "px", range = "4 to 4096";
+        /// Most path vertices (surface bounces and medium collisions) of the path-traced comparison.
+        reference_depth: u32 = 16, unit = "vertices", range = "1 to 256";
+        /// Output folder name in the output directory; empty means the stage id.
+        output: String = String::new(), unit = "", range = "plain folder name";
+    }
+}
+
+/// The filter against the gathering reference.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct GatherCheck {
+    /// Pixels gathered.
+    pub pixels: usize,
+    /// Gather time for them \[ms\].
+    pub ms: f64,
+    /// Full-frame gather time extrapolated per pixel \[ms\].
+    pub frame_ms: f64,
+    /// Relative RMSE of the hierarchical scattered image against the gather on those pixels.
+    pub rel_rmse: f64,
+    /// Extrapolated gather frame time / hierarchical frame time.
+    pub speedup: f64,
+}
+
+/// The effect against path-traced fog.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PhysicsCheck {
+    /// Image size compared.
+    pub size: [usize; 2],
+    /// Paths per pixel.
+    pub samples: u32,
+    /// Path-tracing time (vacuum + fog) \[ms\].
+    pub ms: f64,
+    /// Mean relative standard error of the path-traced fog image.
+    pub reference_rel_stderr: f64,
+    /// Relative RMSE of attenuation-only fog against it.
+    pub attenuation_only_rel_rmse: f64,
+    /// Relative RMSE of the full effect against it.
+    pub effect_rel_rmse: f64,
+    /// Relative RMSE of the vacuum image (no fog at all) against it.
+    pub no_fog_rel_rmse: f64,
+    /// The path-traced image's own noise in the same units, `sqrt(Σ stderr²) / sqrt(Σ L²)`: part of
+    /// every error above. The `*_corrected` fields remove it (`sqrt(e² − noise²)`, the expected error
+    /// against the noise-free image).
+    pub reference_noise: f64,
+    /// Attenuation-only error with the reference's noise removed.
+    pub attenuation_only_corrected: f64,
+    /// Full-effect error with the reference's noise removed.
+    pub effect_corrected: f64,
+}
+
+/// What `summary.json` holds.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FogSummary {
+    /// Scene file.
+    pub scene: String,
+    /// Image size.
+    pub size: [usize; 2],
+    /// Import, BVH, distance buffer, colour buffer \[ms\].
+    pub setup_ms: [f64; 4],
+    /// Effect phases \[ms\]: integrals, MIP chain, filter + compose, total.
+    pub phases_ms: [f64; 4],
+    /// Filter against gather.
+    pub gather: Option<GatherCheck>,
+    /// Effect against path tracing.
+    pub physics: Option<PhysicsCheck>,
+}
+
+impl ImageFogStage {
+    fn fields(&self) -> ViewFields<'_> {
+        ViewFields {
+            scene: &self.scene,
+            camera: self.camera,
+            width: self.width,
+            height: self.height,
+            colour_samples: self.colour_samples,
+            output: &self.output,
+        }
+    }
+
+    /// The scene file resolved against the pipeline's folder.
+    pub fn scene_path(&self, base_dir: &Path) -> std::path::PathBuf {
+        self.fields().scene_path(base_dir)
+    }
+
+    /// Range checks.
+    pub fn validate(&self) -> Vec<FieldIssue> {
+        let mut v = self.fields().validate();
+        let mut issue = |field: &'static str, message: String, help: &str| {
+            v.push(FieldIssue { field, message, help: help.into() });
+        };
+        if self.levels > 16 {
+            issue("levels", format!("levels = {}", self.levels), "use 0 (automatic) to 16");
+        }
+        if self.gather_pixels > 1_000_000 {
+            issue("gather_pixels", format!("gather_pixels = {}", self.gather_pixels), "use 0 to 1000000");
+        }
+        if self.reference_samples > 1_000_000 {
+            issue("reference_samples", format!("reference_samples = {}", self.reference_samples), "use 0 to 1000000");
+        }
+        if !(4..=4096).contains(&self.reference_width) {
+            issue("reference_width", format!("reference_width = {}", self.reference_width), "use 4 to 4096");
+        }
+        if !(1..=256).contains(&self.reference_depth) {
+            issue("reference_depth", format!("reference_depth = {}", self.reference_depth), "use 1 to 256");
+        }
+        v
+    }
+
+    /// The effect's knobs.
+    pub fn options(&self) -> FogOptions {
+        FogOptions {
+            levels: (self.levels > 0).then_some(self.levels as usize),
+            level_rule: if self.paper_levels { LevelRule::Paper } else { LevelRule::VarianceMatched },
+            masking: self.masking,
+            ..FogOptions::default()
+        }
+    }
+
+    fn medium(id: &str, scene: &Scene) -> Result<FogMedium, StageError> {
+        FogMedium::from_scene(scene).ok_or_else(|| StageError::Input {
+            stage: id.into(),
+            message: format!("{} has no global medium", scene.source.display()),
+            help: "add global fog (homogeneous or exponential height fog) to the scene".into(),
+        })
+    }
+
+    /// Runs the stage.
+    pub fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        let fields = self.fields();
+        let dir = fields.out_dir(id, ctx)?;
+        let v = fields.load(id, ctx, None)?;
+        let medium = Self::medium(id, &v.scene)?;
+        let g = &v.gbuffer;
+        let opts = self.options();
+        let t0 = Instant::now();
+        let out = image_fog::render(&g.camera, &g.colour, &g.distance, &medium, &opts);
+        let total_ms = ms(t0);
+        let mut outputs = view::write_image(
+            id,
+            &dir,
+            "fog",
+            &out.image,
+            &[("attenuated", &out.attenuated), ("scattered", &out.scattered), ("colour", &g.colour)],
+        )?;
+        for (name, img) in [("fog_attenuated", &out.attenuated), ("fog_scattered", &out.scattered)] {
+            let png = dir.join(format!("{name}.png"));
+            crate::image_io::write_png_preview(&png, img.width, img.height, &img.data, None)
+                .map_err(|e| StageError::Output { stage: id.into(), path: png.clone(), message: e.to_string() })?;
+            outputs.push(png);
+        }
+        let gather = (self.gather_pixels > 0).then(|| {
+            let (w, h) = (g.camera.width, g.camera.height);
+            let pixels = stratified(w, h, self.gather_pixels as usize);
+            let t0 = Instant::now();
+            let p = image_fog::prepare(&g.camera, &g.colour, &g.distance, &medium);
+            let cap = image_fog::spread_cap(w, h, &opts);
+            let truth = image_fog::gather::gather_pixels(&p.scattered, &p.spread, cap, &pixels);
+            let gather_ms = ms(t0);
+            let mine: Vec<[f32; 3]> = pixels.iter().map(|&(x, y)| out.scattered.at(x, y)).collect();
+            let frame_ms = gather_ms / pixels.len() as f64 * (w * h) as f64;
+            GatherCheck {
+                pixels: pixels.len(),
+                ms: gather_ms,
+                frame_ms,
+                rel_rmse: view::rel_rmse(
+                    &Image { width: mine.len(), height: 1, data: mine },
+                    &Image { width: truth.len(), height: 1, data: truth },
+                ),
+                speedup: frame_ms / total_ms.max(1e-9),
+            }
+        });
+        let physics =
+            if self.reference_samples > 0 { Some(self.physics(id, &v.scene, &v.bvh, &medium)?) } else { None };
+        let s = &out.stats;
+        let summary = FogSummary {
+            scene: fields.scene_path(ctx.base_dir).display().to_string(),
+            size: [g.camera.width, g.camera.height],
+            setup_ms: [v.import_ms, v.bvh_ms, g.distance_ms, g.colour_ms],
+            phases_ms: [s.integrals_ms, s.mip_ms, s.filter_ms, s.total_ms()],
+            gather,
+            physics,
+        };
+        outputs.push(view::write_json(id, &dir.join("summary.json"), &summary)?);
+        let mut line = format!("{}×{}, fog {:.0} ms", g.camera.width, g.camera.height, s.total_ms());
+        if let Some(c) = &summary.gather {
+            line.push_str(&format!(
+                "; vs gathering on {} px: error {:.2} %, {:.0}× faster",
+                c.pixels,
+                100.0 * c.rel_rmse,
+                c.speedup
+            ));
+        }
+        if let Some(c) = &summary.physics {
+            line.push_str(&format!(
+                "; vs path tracing at {}×{} (noise-corrected): attenuation only {:.1} %, with scattering {:.1} %",
+                c.size[0],
+                c.size[1],
+                100.0 * c.attenuation_only_corrected,
+                100.0 * c.effect_corrected
+            ));
+        }
+        Ok(StageOutcome { outputs, summary: format!("{line} → {}", dir.display()) })
+    }
+
+    /// The filter's error against the gathering reference at this stage's size, for several filter
+    /// settings, with the G-buffer colour of the scene: rows (label, frame ms, relative RMSE) and the
+    /// gather's extrapolated frame time.
+    fn settings_vs_gather(&self, id: &str, ctx: &StageContext) -> Result<image_fog::bench::BenchReport, StageError> {
+        let fields = ViewFields { colour_samples: self.colour_samples.min(4), ..self.fields() };
+        let v = fields.load(id, ctx, None)?;
+        let medium = Self::medium(id, &v.scene)?;
+        let g = &v.gbuffer;
+        let frames = [image_fog::bench::Frame { cam: g.camera, colour: &g.colour, distance: &g.distance }];
+        let cfg = image_fog::bench::BenchConfig { runs: 3, gather_grid: Some((16, 9)) };
+        image_fog::bench::bench_frames(&frames, &medium, &cfg).map_err(|e| StageError::Input {
+            stage: id.into(),
+            message: e,
+            help: "fix the stage's inputs".into(),
+        })
+    }
+
+    /// `voltab report --stages`: the hierarchical filter's error against the gathering reference and its
+    /// frame time for several settings (`<id>-fog.md`, `<id>-fog-error-vs-time.png` in `report_dir`).
+    pub fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<String, StageError> {
+        let out =
+            |path: &Path, message: String| StageError::Output { stage: id.into(), path: path.to_path_buf(), message };
+        let r = self.settings_vs_gather(id, ctx)?;
+        std::fs::create_dir_all(report_dir).map_err(|e| out(report_dir, e.to_string()))?;
+        let series: Vec<Series> =
+            r.errors.iter().map(|e| Series { name: e.label.clone(), points: vec![(e.frame_ms, e.rel_rmse)] }).collect();
+        let png = report_dir.join(format!("{id}-fog-error-vs-time.png"));
+        let plot = Plot {
+            title: &format!("{id}: image-space fog, error vs gathering against frame time"),
+            x_label: "frame time [ms]",
+            y_label: "relative RMSE of scattered light vs gather",
+            x_scale: Scale::Log10,
+            y_scale: Scale::Log10,
+            series: &series,
+            width: 1024,
+            height: 720,
+        };
+        write_png(&png, &plot).map_err(|e| out(&png, e.to_string()))?;
+        let mut md = format!(
+            "## {id}: image-space fog (iser2018), {}×{}\n\nRelative RMSE of the filtered scattered light against the gathering filter on {} stratified pixels; the gather would take {:.0} s for the whole frame ({}), {:.0}× the hierarchical filter.\n\n| setting | frame ms | rel. RMSE |\n|---|---:|---:|\n",
+            self.width,
+            self.height,
+            r.gather.pixels,
+            r.gather.frame_seconds,
+            if r.gather.full { "measured" } else { "extrapolated per pixel" },
+            r.gather.speedup
+        );
+        for e in &r.errors {
+            md.push_str(&format!("| {} | {:.1} | {:.4} |\n", e.label, e.frame_ms, e.rel_rmse));
+        }
+        let md_path = report_dir.join(format!("{id}-fog.md"));
+        crate::cache::write_atomic(&md_path, md.as_bytes()).map_err(|e| out(&md_path, e.to_string()))?;
+        Ok(md)
+    }
+
+    /// `voltab bench --effects`: frame time and phases at 1280×720 and 1920×1080 (G-buffer colour of the
+    /// scene, 2 paths per pixel) on the current rayon pool, and the gathering reference at 1080p on a
+    /// stratified pixel subset, extrapolated per pixel.
+    pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<BenchRow>), StageError> {
+        let fields = ViewFields { colour_samples: 2, ..self.fields() };
+        let mut views = Vec::new();
+        for size in [(1280, 720), (1920, 1080)] {
+            views.push(fields.load(id, ctx, Some(size))?);
+        }
+        let medium = Self::medium(id, &views[0].scene)?;
+        let frames: Vec<image_fog::bench::Frame<'_>> = views
+            .iter()
+            .map(|v| image_fog::bench::Frame {
+                cam: v.gbuffer.camera,
+                colour: &v.gbuffer.colour,
+                distance: &v.gbuffer.distance,
+            })
+            .collect();
+        let cfg = image_fog::bench::BenchConfig { runs: 7, gather_grid: Some((8, 6)) };
+        let r = image_fog::bench::bench_frames(&frames, &medium, &cfg).map_err(|e| StageError::Input {
+            stage: id.into(),
+            message: e,
+            help: "fix the stage's inputs".into(),
+        })?;
+        let f = r.frames.last().map_or(f64::NAN, |f| f.median_ms);
+        let rows = vec![BenchRow {
+            what: format!(
+                "fog {id}: gathering reference vs hierarchical filter at {}×{}",
+                r.gather.width, r.gather.height
+            ),
+            baseline_ms: r.gather.frame_seconds * 1e3,
+            candidate_ms: f,
+            speedup: r.gather.speedup,
+            note: format!(
+                "gather {} on {} pixels; filter error vs gather {:.3}",
+                if r.gather.full { "measured" } else { "extrapolated per pixel" },
+                r.gather.pixels,
+                r.errors.first().map_or(f64::NAN, |e| e.rel_rmse)
+            ),
+        }];
+        Ok((r.to_string(), rows))
+    }
+
+    /// The physics comparison (module doc).
+    fn physics(&self, id: &str, scene: &Scene, bvh: &SceneBvh, medium: &FogMedium) -> Result<PhysicsCheck, StageError> {
+        let w = self.reference_width as usize;
+        let h = ((w as f64 * self.height as f64 / self.width as f64).round() as usize).max(1);
+        let path = Path::new(&self.scene);
+        let cam = self.fields().camera(id, scene, path, Some((w, h)))?;
+        let t0 = Instant::now();
+        let vacuum = self.trace(scene, bvh, &cam, false).0;
+        let (fog, rel_stderr, noise) = self.trace(scene, bvh, &cam, true);
+        let pt_ms = ms(t0);
+        let distance = crate::effects::gbuffer::distance_image(bvh, &cam);
+        let out = image_fog::render(&cam, &vacuum, &distance, medium, &self.options());
+        let att = view::rel_rmse(&out.attenuated, &fog);
+        let eff = view::rel_rmse(&out.image, &fog);
+        let corrected = |e: f64| (e * e - noise * noise).max(0.0).sqrt();
+        Ok(PhysicsCheck {
+            size: [w, h],
+            samples: self.reference_samples,
+            ms: pt_ms,
+            reference_rel_stderr: rel_stderr,
+            attenuation_only_rel_rmse: att,
+            effect_rel_rmse: eff,
+            no_fog_rel_rmse: view::rel_rmse(&vacuum, &fog),
+            reference_noise: noise,
+            attenuation_only_corrected: corrected(att),
+            effect_corrected: corrected(eff),
+        })
+    }
+
+    /// Path-traced image of `cam` with or without media, its mean relative standard error (luminance),
+    /// and its noise as a relative RMSE (`sqrt(Σ stderr²) / sqrt(Σ L²)` over pixels and channels).
+    fn trace(&self, scene: &Scene, bvh: &SceneBvh, cam: &ViewCamera, media: bool) -> (RgbImage, f64, f64) {
+        let rays: Vec<CameraRay> = (0..cam.height)
+            .flat_map(|y| (0..cam.width).map(move |x| (x, y)))
+            .map(|(x, y)| CameraRay { origin: cam.position.to_array(), direction: cam.pixel_dir(x, y).to_array() })
+            .collect();
+        let opts = VolPathOptions {
+            samples: self.reference_samples,
+            max_depth: self.reference_depth,
+            rr_depth: 4,
+            // Independent streams for the two images, so the noise correction's independence holds.
+            seed: if media { 0x5eed } else { 0x5eed ^ 1 },
+            surface_bounces: true,
+            media,
+        };
+        let (est, _) = volpath::radiance(scene, bvh, &rays, &opts);
+        let lum = |c: [f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+        let (mut se, mut m, mut var, mut sq) = (0.0, 0.0, 0.0, 0.0);
+        for e in &est {
+            se += lum(e.stderr);
+            m += lum(e.mean);
+            var += e.stderr.iter().map(|x| x * x).sum::<f64>();
+            sq += e.mean.iter().map(|x| x * x).sum::<f64>();
+        }
+        let img = Image {
+            width: cam.width,
+            height: cam.height,
+            data: est.iter().map(|e| e.mean.map(|c| if c.is_finite() { c as f32 } else { 0.0 })).collect(),
+        };
+        let noise = if sq > 0.0 { (var / sq).sqrt() } else { 0.0 };
+        (img, if m > 0.0 { se / m } else { 0.0 }, noise)
+    }
+}
+
+/// About `n` pixel centres on a stratified grid over a `w × h` image (at least one).
+fn stratified(w: usize, h: usize, n: usize) -> Vec<(usize, usize)> {
+    let aspect = w as f64 / h as f64;
+    let ny = ((n as f64 / aspect).sqrt().round() as usize).clamp(1, h);
+    let nx = (n / ny).clamp(1, w);
+    (0..ny).flat_map(|j| (0..nx).map(move |i| ((2 * i + 1) * w / (2 * nx), (2 * j + 1) * h / (2 * ny)))).collect()
+}
