@@ -73,5 +73,6 @@ pub fn rows() -> Vec<Row> {
     v.extend(crate::tables::phase_hg::stability_rows());
     v.extend(crate::tables::zh_response::stability_rows());
     v.extend(crate::tables::ms_lobes::stability_rows());
+    v.extend(crate::effects::image_fog::medium::stability_rows());
     v
 }

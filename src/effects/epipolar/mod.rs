@@ -424,24 +424,6 @@ pub fn render(
     EpipolarOutput { inscatter, transmittance, stats }
 }
 
-/// Writes `<dir>/<stem>.exr` (RGB = in-scatter, layer `transmittance`) and an sRGB preview
-/// `<dir>/<stem>.png` of the in-scatter, creating `dir`.
-pub fn write_images(out: &EpipolarOutput, dir: &std::path::Path, stem: &str) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let (w, h) = (out.inscatter.width, out.inscatter.height);
-    crate::image_io::write_exr_rgb(
-        &dir.join(format!("{stem}.exr")),
-        w,
-        h,
-        &out.inscatter.data,
-        &[("transmittance", &out.transmittance.data)],
-    )
-    .map_err(|e| e.to_string())?;
-    crate::image_io::write_png_preview(&dir.join(format!("{stem}.png")), w, h, &out.inscatter.data, None)
-        .map(|_| ())
-        .map_err(|e| e.to_string())
-}
-
 /// One row of unrectified in-scatter, its transmittance and the columns left for ray marching.
 type UnrectifiedRow = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<usize>);
 

@@ -232,3 +232,72 @@ pub fn spread_angle(u: f64, v: f64) -> f64 {
     // v / (4uv/3 + 8) = 1 / (4u/3 + 8/v): no ∞/∞ when u·v overflows.
     (1.0 / (4.0 * u / 3.0 + 8.0 / v)).sqrt()
 }
+
+/// Rows of the stability matrix ([`crate::stability`]): the fog integrals and the spread at the
+/// inputs where the paper's forms cancel or overflow, each against its analytic limit.
+pub fn stability_rows() -> Vec<crate::stability::Row> {
+    use crate::stability::{Expect, Row};
+    let row = |formula: &'static str, input: String, value: f64, expect: Expect| Row {
+        kind: "ImageFog",
+        formula,
+        input,
+        value,
+        expect,
+    };
+    let p = "P = ∫ρ' e^{-b(h0 + tμ)} dt";
+    let w = "W(s) (Eq. 1)";
+    vec![
+        // ⟨ω,n⟩ → 0: the quotient (1 − e^{−bDμ})/(bμ) → D.
+        row(
+            p,
+            "ρ'=1, b=0.05, h0=0, μ=1e-12, D=100".into(),
+            exponential_integral(1.0, 0.05, 0.0, 1e-12, 100.0),
+            Expect::Close { to: 100.0, rel: 1e-9 },
+        ),
+        row(
+            p,
+            "ρ'=1, b=0.05, h0=0, μ=-1e-12, D=100".into(),
+            exponential_integral(1.0, 0.05, 0.0, -1e-12, 100.0),
+            Expect::Close { to: 100.0, rel: 1e-9 },
+        ),
+        // Tiny b: homogeneous limit ρ'D.
+        row(
+            p,
+            "ρ'=1, b=1e-12, h0=0, μ=0.7, D=50".into(),
+            exponential_integral(1.0, 1e-12, 0.0, 0.7, 50.0),
+            Expect::Close { to: 50.0, rel: 1e-9 },
+        ),
+        // Huge b·D downwards: the naive e^{1000} overflows; P = e^{700}.
+        row(
+            p,
+            "ρ'=1, b=1, h0=300, μ=-1, D=1000".into(),
+            exponential_integral(1.0, 1.0, 300.0, -1.0, 1000.0),
+            Expect::Close { to: 700f64.exp(), rel: 1e-9 },
+        ),
+        // Sky pixel looking up: D = ∞ gives ρ' e^{−b h0}/(bμ).
+        row(
+            p,
+            "ρ'=0.8, b=0.05, h0=-1.7, μ=0.5, D=∞".into(),
+            exponential_integral(0.8, 0.05, -1.7, 0.5, f64::INFINITY),
+            Expect::Close { to: 0.8 * (0.05f64 * 1.7).exp() / 0.025, rel: 1e-12 },
+        ),
+        // Zero path: no spread (level 0).
+        row(w, "s=0".into(), spread_width(0.0, 0.01, 0.02, 0.5), Expect::InRange(0.0, 0.0)),
+        // Short path: W ≈ s·sqrt(σ_s(1−g)s/8) (u → 0, v → 0).
+        row(
+            w,
+            "s=1e-6, σ_a=0.01, σ_s=0.02, g=0.5".into(),
+            spread_width(1e-6, 0.01, 0.02, 0.5),
+            Expect::Close { to: 1e-6 * (0.01f64 * 1e-6 / 8.0).sqrt(), rel: 1e-6 },
+        ),
+        // g → 1: nothing spreads.
+        row(w, "s=100, g=1".into(), spread_width(100.0, 0.01, 0.02, 1.0), Expect::InRange(0.0, 0.0)),
+        // Long path with absorption: W/s → sqrt(3/(4 σ_a s)).
+        row(
+            w,
+            "s=1e12, σ_a=0.01, σ_s=0.02, g=0.5".into(),
+            spread_width(1e12, 0.01, 0.02, 0.5) / 1e12,
+            Expect::Close { to: (0.75f64 / (0.01 * 1e12)).sqrt(), rel: 1e-6 },
+        ),
+    ]
+}
