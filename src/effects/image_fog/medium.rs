@@ -6,15 +6,14 @@
 //! `T = e^{−τ_t}` and the spread: Eq. 1 `W(s)` and its density-scaled form Eq. 3 `W(P)`, turned into an
 //! image-space standard deviation in pixels ([`PixelFog::spread_px`]).
 //!
-//! **Stability.** [`exponential_integral`] follows the approach of
-//! [`crate::scene::bvh::exponential_density_integral`] (which is stable): Eq. 4 as
+//! **Stability.** [`exponential_integral`] is [`crate::scene::bvh::exponential_density_integral`]
+//! (one implementation for the scene's media queries and the effect): Eq. 4 as
 //! `ρ' D e^{max(a₀, a₁)} φ(|b D μ|)` with the log-densities `a₀ = −b h₀`, `a₁ = a₀ − b D μ` at the two
 //! ends and `φ(y) = −expm1(−y)/y`: no cancellation for `μ = ⟨ω, n⟩ → 0` or tiny `b`, the exponential
 //! taken at the denser end (no overflow for downward rays unless the integral itself exceeds
-//! `f64::MAX`, then `+∞`), and `D = ∞` handled (finite for rays going up, `+∞` otherwise). It differs
-//! in cost only: the log-space form is evaluated lazily, when the direct product is not a normal
-//! number, which saves three logarithms per pixel on the common path. The tests check it against
-//! Gauss–Legendre quadrature of the density.
+//! `f64::MAX`, then `+∞`), and `D = ∞` handled (finite for rays going up, `+∞` otherwise); the
+//! log-space form is only evaluated when the direct product is not a normal number. The tests check it
+//! against Gauss–Legendre quadrature of the density.
 //! Every quantity derived from `P` is written so that `P = +∞` gives its limit instead of NaN.
 
 use glam::DVec3;
@@ -173,30 +172,8 @@ impl PixelFog {
 }
 
 /// Eq. 4 in stable form: `∫₀ᴰ ρ' e^{−b(h₀ + t μ)} dt` for a ray starting at height `h₀ = ⟨c − o, n⟩`
-/// with direction cosine `μ = ⟨ω, n⟩` (module doc). `D = +∞` allowed; `D ≤ 0` or `ρ' ≤ 0` → 0.
-pub fn exponential_integral(rho: f64, b: f64, h0: f64, mu: f64, d: f64) -> f64 {
-    if !(d > 0.0 && rho > 0.0) {
-        return 0.0;
-    }
-    let a0 = -b * h0;
-    if !a0.is_finite() {
-        return if a0 > 0.0 { f64::INFINITY } else { 0.0 };
-    }
-    let k = b * mu; // decay rate of the log-density along the ray [1/m]
-    if d == f64::INFINITY {
-        if k.is_nan() || k <= 0.0 {
-            return f64::INFINITY;
-        }
-        let direct = rho * a0.exp() / k;
-        return if direct.is_normal() { direct } else { (rho.ln() + a0 - k.ln()).exp() };
-    }
-    let y = (k * d).abs();
-    let amax = a0.max(a0 - k * d);
-    // D·φ(y) for y < 1; (1 − e^{−y})/|k| for y ≥ 1 (then |k| ≥ 1/D > 0 and the factor is ≤ D).
-    let factor = if y < 1.0 { if y == 0.0 { d } else { d * (-(-y).exp_m1() / y) } } else { -(-y).exp_m1() / k.abs() };
-    let direct = rho * amax.exp() * factor;
-    if direct.is_normal() { direct } else { (rho.ln() + amax + factor.ln()).exp() }
-}
+/// with direction cosine `μ = ⟨ω, n⟩`; the scene's media queries use the same function.
+pub use crate::scene::bvh::exponential_density_integral as exponential_integral;
 
 /// Eq. 1 (Premože et al.): `W(s) = sqrt(½ (2σ_a/(3s) + 4/(s³ σ_s (1−g)))^{-1})` \[m\], the standard
 /// deviation of the spatial spreading of a pencil after a path of length `s` in a homogeneous medium.

@@ -177,26 +177,21 @@ pub fn exponential_density_integral(rho: f64, falloff: f64, h0: f64, mu: f64, d:
     }
     let k = falloff * mu; // decay rate of the log-density along the ray [1/m]
     if d == f64::INFINITY {
-        return if k > 0.0 { from_log(rho.ln() + a0 - k.ln(), rho * a0.exp() / k) } else { f64::INFINITY };
+        return if k > 0.0 { from_log(|| rho.ln() + a0 - k.ln(), rho * a0.exp() / k) } else { f64::INFINITY };
     }
     let x = k * d;
     let a1 = a0 - x;
     let amax = a0.max(a1);
     let y = x.abs();
     // D·φ(y) directly for y < 1; (1 − e^{−y})/|k| for y ≥ 1 (D/y would lose D when y overflows).
-    let (factor, ln_factor) = if y < 1.0 {
-        let phi = if y == 0.0 { 1.0 } else { -(-y).exp_m1() / y };
-        (d * phi, d.ln() + phi.ln())
-    } else {
-        let num = -(-y).exp_m1();
-        (num / k.abs(), num.ln() - k.abs().ln())
-    };
-    from_log(rho.ln() + amax + ln_factor, rho * amax.exp() * factor)
+    let factor = if y < 1.0 { d * if y == 0.0 { 1.0 } else { -(-y).exp_m1() / y } } else { -(-y).exp_m1() / k.abs() };
+    from_log(|| rho.ln() + amax + factor.ln(), rho * amax.exp() * factor)
 }
 
-/// `direct` when it is a normal finite number, else `exp(log)` (the same value formed in log space).
-fn from_log(log: f64, direct: f64) -> f64 {
-    if direct.is_normal() { direct } else { log.exp() }
+/// `direct` when it is a normal finite number, else `exp(log())` (the same value formed in log space;
+/// the logarithms are only taken then, which keeps the common case cheap for per-pixel use).
+fn from_log(log: impl FnOnce() -> f64, direct: f64) -> f64 {
+    if direct.is_normal() { direct } else { log().exp() }
 }
 
 /// `∫ ρ ds` over `[t0, t1]` of `ray` for one density field.
