@@ -125,3 +125,65 @@ fn effect_stage_errors_name_the_field_or_the_file() {
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("camera = 3 does not exist"), "{}", text(&o));
 }
+
+/// Buffers from another renderer: the colour and distance of a voltab run written to EXR files (the
+/// distance once as ray distance, once as a z-buffer) and fed back through `colour_exr` /
+/// `distance_exr` give the same fogged image as the run that rendered them.
+#[test]
+fn image_fog_accepts_buffers_from_another_renderer() {
+    use voltab::effects::{ViewCamera, gbuffer};
+    let d = tempdir();
+    let outdoor = scene("outdoor.gltf");
+    let run = |name: &str, extra: &str| {
+        let p = write(
+            d.path(),
+            &format!("{name}.ron"),
+            &format!(
+                "(stages: [ImageFog(id: \"{name}\", scene: \"{outdoor}\", width: 80, height: 45, colour_samples: 1{extra})])"
+            ),
+        );
+        let out = d.path().join("out");
+        let o = voltab().args(["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        voltab::image_io::read_exr_rgb(&out.join(name).join("fog.exr")).unwrap()
+    };
+    let own = run("own", "");
+    let colour = own.rgb(Some("colour")).unwrap();
+    voltab::image_io::write_exr_rgb(&d.path().join("colour.exr"), 80, 45, &colour, &[]).unwrap();
+    let s = voltab::scene::Scene::load(std::path::Path::new(&outdoor)).unwrap();
+    let bvh = voltab::scene::bvh::SceneBvh::build(&s);
+    let cam = ViewCamera::from_scene(&s.cameras[0], 80, 45).unwrap();
+    let dist = gbuffer::distance_image(&bvh, &cam);
+    let sky = |x: f32| if x.is_finite() { x } else { 1e30 };
+    let ray: Vec<[f32; 3]> = dist.data.iter().map(|&x| [sky(x); 3]).collect();
+    voltab::image_io::write_exr_rgb(&d.path().join("dist.exr"), 80, 45, &ray, &[]).unwrap();
+    let z: Vec<[f32; 3]> = (0..45)
+        .flat_map(|y| (0..80).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let t = dist.at(x, y);
+            [sky(if t.is_finite() { (f64::from(t) * cam.pixel_dir(x, y).dot(cam.forward)) as f32 } else { t }); 3]
+        })
+        .collect();
+    voltab::image_io::write_exr_rgb(&d.path().join("z.exr"), 80, 45, &z, &[]).unwrap();
+
+    let from_ray = run("ray", ", colour_exr: \"colour.exr\", distance_exr: \"dist.exr\"");
+    assert_eq!(from_ray.rgb(None), own.rgb(None), "ray distances give the identical image");
+    let from_z = run("z", ", colour_exr: \"colour.exr\", distance_exr: \"z.exr\", depth_is_z: true");
+    for (a, b) in from_z.rgb(None).unwrap().iter().zip(own.rgb(None).unwrap()) {
+        for c in 0..3 {
+            assert!((a[c] - b[c]).abs() <= 1e-4 * b[c].abs().max(1e-3), "{a:?} vs {b:?}");
+        }
+    }
+    // A distance EXR of another size is refused, naming both files.
+    voltab::image_io::write_exr_rgb(&d.path().join("small.exr"), 8, 8, &[[1.0; 3]; 64], &[]).unwrap();
+    let p = write(
+        d.path(),
+        "bad.ron",
+        &format!(
+            "(stages: [ImageFog(id: \"bad\", scene: \"{outdoor}\", colour_exr: \"colour.exr\", distance_exr: \"small.exr\")])"
+        ),
+    );
+    let o = common::run(&["run", p.to_str().unwrap(), "--out", d.path().join("out").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("small.exr") && text(&o).contains("80×45"), "{}", text(&o));
+}

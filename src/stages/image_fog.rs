@@ -23,9 +23,10 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use super::view::{self, ViewFields, ms};
+use super::view::{self, View, ViewFields, ms};
 use super::{StageContext, StageError, StageOutcome};
 use crate::bench::BenchRow;
+use crate::effects::gbuffer::GBuffer;
 use crate::effects::image_fog::{self, FogMedium, FogOptions, LevelRule};
 use crate::effects::{Image, RgbImage, ViewCamera};
 use crate::reference::volpath::{self, CameraRay, VolPathOptions};
@@ -61,6 +62,15 @@ crate::declare_params! {
         reference_width: u32 = 160, unit = "px", range = "4 to 4096";
         /// Most path vertices (surface bounces and medium collisions) of the path-traced comparison.
         reference_depth: u32 = 16, unit = "vertices", range = "1 to 256";
+        /// Colour buffer from another renderer (EXR with R, G, B: linear radiance), relative to the pipeline
+        /// file; empty: voltab renders it. Needs distance_exr; the scene still gives the camera and fog.
+        colour_exr: String = String::new(), unit = "", range = "empty or path to an EXR file";
+        /// Distance buffer from another renderer (EXR; channel Z, depth, distance, R or Y, the first present),
+        /// same size as colour_exr; infinite or huge values are sky.
+        distance_exr: String = String::new(), unit = "", range = "empty or path to an EXR file";
+        /// The distance EXR holds view-space depth along the camera axis (a z-buffer) rather than distance
+        /// along each pixel's ray; it is converted with the camera.
+        depth_is_z: bool = false, unit = "", range = "true or false";
         /// Output folder name in the output directory; empty means the stage id.
         output: String = String::new(), unit = "", range = "plain folder name";
     }
@@ -160,6 +170,13 @@ impl ImageFogStage {
         if !(4..=4096).contains(&self.reference_width) {
             issue("reference_width", format!("reference_width = {}", self.reference_width), "use 4 to 4096");
         }
+        if self.colour_exr.is_empty() != self.distance_exr.is_empty() {
+            issue(
+                "colour_exr",
+                "colour_exr and distance_exr must be given together".into(),
+                "give both EXR files of the other renderer, or neither (voltab renders the buffers)",
+            );
+        }
         if !(1..=256).contains(&self.reference_depth) {
             issue("reference_depth", format!("reference_depth = {}", self.reference_depth), "use 1 to 256");
         }
@@ -188,7 +205,7 @@ impl ImageFogStage {
     pub fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
         let fields = self.fields();
         let dir = fields.out_dir(id, ctx)?;
-        let v = fields.load(id, ctx, None)?;
+        let v = if self.colour_exr.is_empty() { fields.load(id, ctx, None)? } else { self.load_exr(id, ctx)? };
         let medium = Self::medium(id, &v.scene)?;
         let g = &v.gbuffer;
         let opts = self.options();
@@ -260,6 +277,87 @@ impl ImageFogStage {
             ));
         }
         Ok(StageOutcome { outputs, summary: format!("{line} → {}", dir.display()) })
+    }
+
+    /// The scene (camera, fog) with colour and distance buffers read from another renderer's EXR files.
+    fn load_exr(&self, id: &str, ctx: &StageContext) -> Result<View, StageError> {
+        let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
+        let t0 = Instant::now();
+        let read = |name: &str| {
+            let path = ctx.base_dir.join(name);
+            crate::image_io::read_exr_rgb(&path)
+                .map_err(|e| {
+                    fail(e.to_string(), "give a readable single-part EXR file (path relative to the pipeline file)")
+                })
+                .map(|img| (path, img))
+        };
+        let (cpath, cimg) = read(&self.colour_exr)?;
+        let (dpath, dimg) = read(&self.distance_exr)?;
+        if (cimg.width, cimg.height) != (dimg.width, dimg.height) {
+            return Err(fail(
+                format!(
+                    "{} is {}×{} but {} is {}×{}",
+                    cpath.display(),
+                    cimg.width,
+                    cimg.height,
+                    dpath.display(),
+                    dimg.width,
+                    dimg.height
+                ),
+                "render both buffers at the same size",
+            ));
+        }
+        let colour = cimg.rgb(None).ok_or_else(|| {
+            fail(format!("{} has no R, G, B channels", cpath.display()), "write the colour as channels R, G, B")
+        })?;
+        let names = ["Z", "depth", "distance", "R", "Y"];
+        let dist = names.iter().find_map(|n| dimg.channels.get(*n)).ok_or_else(|| {
+            fail(
+                format!(
+                    "{} has none of the channels {names:?} (it has {:?})",
+                    dpath.display(),
+                    dimg.channels.keys().collect::<Vec<_>>()
+                ),
+                "write the distance as channel Z (or depth, distance, R, Y)",
+            )
+        })?;
+        let (w, h) = (cimg.width, cimg.height);
+        for (i, c) in colour.iter().enumerate() {
+            if c.iter().any(|x| !x.is_finite() || *x < 0.0) {
+                return Err(fail(
+                    format!("{}: pixel ({}, {}) is {c:?}", cpath.display(), i % w, i / w),
+                    "colours must be finite and non-negative linear radiance",
+                ));
+            }
+        }
+        let path = self.fields().scene_path(ctx.base_dir);
+        let t1 = Instant::now();
+        let scene = Scene::load(&path).map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
+        let import_ms = ms(t1);
+        let t1 = Instant::now();
+        let bvh = SceneBvh::build(&scene);
+        let bvh_ms = ms(t1);
+        let camera = self.fields().camera(id, &scene, &path, Some((w, h)))?;
+        let mut distance = Image::filled(w, h, f32::INFINITY);
+        for (i, &d) in dist.iter().enumerate() {
+            if d.is_nan() || d < 0.0 {
+                return Err(fail(
+                    format!("{}: pixel ({}, {}) has distance {d}", dpath.display(), i % w, i / w),
+                    "distances must be non-negative (infinite or huge for sky)",
+                ));
+            }
+            // A z-buffer value is the depth along the view axis: the ray's distance is z / cos.
+            let cos = if self.depth_is_z { camera.pixel_dir(i % w, i / w).dot(camera.forward) } else { 1.0 };
+            distance.data[i] = if d >= 1e30 { f32::INFINITY } else { (f64::from(d) / cos) as f32 };
+        }
+        let gbuffer = GBuffer {
+            camera,
+            colour: Image { width: w, height: h, data: colour },
+            distance,
+            distance_ms: ms(t0),
+            colour_ms: 0.0,
+        };
+        Ok(View { scene, bvh, gbuffer, import_ms, bvh_ms })
     }
 
     /// The filter's error against the gathering reference at this stage's size, for several filter
