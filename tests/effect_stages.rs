@@ -187,3 +187,31 @@ fn image_fog_accepts_buffers_from_another_renderer() {
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("small.exr") && text(&o).contains("80×45"), "{}", text(&o));
 }
+
+/// A coloured light: a uniform light texture of (0.5, 1, 2) scales the in-scatter per channel.
+#[test]
+fn god_rays_light_texture_scales_the_inscatter() {
+    let d = tempdir();
+    voltab::image_io::write_exr_rgb(&d.path().join("cookie.exr"), 4, 4, &[[0.5, 1.0, 2.0]; 16], &[]).unwrap();
+    let room = scene("window_room.gltf");
+    let run = |name: &str, extra: &str| {
+        let p = write(
+            d.path(),
+            &format!("{name}.ron"),
+            &format!(
+                "(stages: [EpipolarShadows(id: \"{name}\", scene: \"{room}\", width: 64, height: 48, colour_samples: 1, shadow_map: 256{extra})])"
+            ),
+        );
+        let out = d.path().join("out");
+        let o = voltab().args(["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        voltab::image_io::read_exr_rgb(&out.join(name).join("godrays.exr")).unwrap().rgb(Some("inscatter")).unwrap()
+    };
+    let white = run("white", "");
+    let tinted = run("tinted", ", light_texture: \"cookie.exr\"");
+    let total = |img: &[[f32; 3]], c: usize| img.iter().map(|p| f64::from(p[c])).sum::<f64>();
+    for (c, k) in [0.5, 1.0, 2.0].into_iter().enumerate() {
+        let (w, t) = (total(&white, c), total(&tinted, c));
+        assert!(w > 0.0 && (t / w - k).abs() < 1e-3 * k, "channel {c}: {t} / {w} vs {k}");
+    }
+}

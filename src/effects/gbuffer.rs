@@ -64,7 +64,7 @@ pub struct GBuffer {
 }
 
 /// Renders the distance buffer and the vacuum colour buffer of `cam` (the colour by
-/// [`volpath::radiance`](crate::reference::volpath::radiance) with media off: emission plus light from
+/// [`volpath::radiance`] with media off: emission plus light from
 /// every light kind with shadow rays, and `bounces` diffuse bounces). Media are left to the effects.
 pub fn render(scene: &Scene, bvh: &SceneBvh, cam: &ViewCamera, opts: &ColourOptions) -> GBuffer {
     let t0 = Instant::now();

@@ -527,6 +527,32 @@ fn plan_ms_lobes(t: &ValidatedTable, d: &MsLobes, needs: &Needs) -> TablePlan {
     )
 }
 
+/// A screen-space effect stage renders its own scene: it runs when that scene is among the planned
+/// scenes and has what the effect needs (`lacks` names what is missing).
+fn effect_stage(
+    s: &ValidatedStage,
+    effect: &str,
+    scene: &str,
+    p: &ValidatedPipeline,
+    scenes: &[Scene],
+    lacks: impl Fn(&Scene) -> Option<&'static str>,
+) -> StagePlan {
+    let path = p.path().parent().unwrap_or(std::path::Path::new("")).join(scene);
+    let same = |a: &std::path::Path| match (a.canonicalize(), path.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == path,
+    };
+    let (decision, reason) = match scenes.iter().find(|sc| same(&sc.source)) {
+        None => (Decision::Skip, format!("its scene {scene} is not among the planned scenes")),
+        Some(sc) => match lacks(sc) {
+            Some(what) => (Decision::Skip, format!("{scene} has no {what}")),
+            None => (Decision::Compile, format!("renders {effect} of {scene}")),
+        },
+    };
+    let def = (decision == Decision::Compile).then(|| s.def().clone());
+    StagePlan { id: s.id().to_string(), decision, reason, def }
+}
+
 impl Plan {
     /// Plans a pipeline for scenes (their union of needs).
     pub fn new(p: &ValidatedPipeline, scenes: &[Scene]) -> Plan {
@@ -559,18 +585,18 @@ impl Plan {
                         def: Some(s.def().clone()),
                     },
                 },
-                StageDef::EpipolarShadows(e) => StagePlan {
-                    id: s.id().to_string(),
-                    decision: Decision::Compile,
-                    reason: format!("renders god rays of {}", e.scene),
-                    def: Some(s.def().clone()),
-                },
-                StageDef::ImageFog(f) => StagePlan {
-                    id: s.id().to_string(),
-                    decision: Decision::Compile,
-                    reason: format!("renders image-space fog of {}", f.scene),
-                    def: Some(s.def().clone()),
-                },
+                StageDef::EpipolarShadows(e) => effect_stage(s, "god rays", &e.scene, p, scenes, |sc| {
+                    if crate::effects::epipolar::EpiLight::from_scene(sc).is_none() {
+                        Some("directional or spot light")
+                    } else if crate::effects::epipolar::EpiMedium::from_scene(sc).is_none() {
+                        Some("homogeneous global medium")
+                    } else {
+                        None
+                    }
+                }),
+                StageDef::ImageFog(f) => effect_stage(s, "image-space fog", &f.scene, p, scenes, |sc| {
+                    crate::effects::image_fog::FogMedium::from_scene(sc).is_none().then_some("global medium")
+                }),
                 StageDef::PlotPhase(pp) => {
                     let table = tables.iter().find(|t| t.id == pp.table);
                     let kept: Option<Vec<f64>> = table.and_then(|t| match &t.def {

@@ -276,3 +276,33 @@ fn consumers_get_the_same_answers_from_pruned_tables() {
     println!("worst relative difference of the total irradiance, pruned vs full ZH: {worst:.3e}");
     assert!(worst < 1e-6, "{worst}");
 }
+
+/// The effect stages run on their own scenes when those are planned and have what the effect needs.
+#[test]
+fn effect_stages_follow_their_scenes() {
+    let p = default_pipeline();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let load = |n: &str| Scene::load(&root.join("scenes").join(n)).unwrap();
+    let stage = |plan: &Plan, id: &str| {
+        let s = plan.stages.iter().find(|s| s.id == id).unwrap();
+        (s.decision, s.reason.clone())
+    };
+    let plan = Plan::new(&p, &[load("window_room.gltf"), load("outdoor.gltf")]);
+    assert_eq!(
+        stage(&plan, "window_room_god_rays"),
+        (Decision::Compile, "renders god rays of ../scenes/window_room.gltf".to_string())
+    );
+    assert_eq!(stage(&plan, "outdoor_fog").0, Decision::Compile);
+    // Without fog the god rays have nothing to scatter in; the fog stage is not planned for this scene set.
+    let mut room = load("window_room.gltf");
+    room.media.clear();
+    let plan = Plan::new(&p, &[room]);
+    assert_eq!(
+        stage(&plan, "window_room_god_rays"),
+        (Decision::Skip, "../scenes/window_room.gltf has no homogeneous global medium".to_string())
+    );
+    assert_eq!(
+        stage(&plan, "outdoor_fog"),
+        (Decision::Skip, "its scene ../scenes/outdoor.gltf is not among the planned scenes".to_string())
+    );
+}

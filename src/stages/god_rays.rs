@@ -3,7 +3,7 @@
 //!
 //! **Input.** A scene file (relative to the pipeline file) with a perspective camera, a directional or
 //! spot light and a homogeneous global medium. **Phases.** Import → BVH → G-buffer of the camera
-//! ([`view`](super::view): vacuum colour and distance, voltab's own ray tracer) → light shadow map
+//! ([`view`]: vacuum colour and distance, voltab's own ray tracer) → light shadow map
 //! ([`epipolar::render_shadow_map`]) → [`epipolar::render`] (rectification into epipolar slices with the
 //! sinh distribution, Sec. 8; Fenwick half-tree integration of the rank-N SVD factorisation of
 //! `I(γ, β)`, Secs. 4–6; depth-mode prefiltering, Sec. 7; ray marching in the disc around the epipole;
@@ -51,6 +51,9 @@ crate::declare_params! {
         samples_per_pixel: f64 = 1.0, unit = "", range = "0.05 to 8";
         /// Steps per ray of a BVH shadow-ray marcher to compare against (0: no comparison).
         reference_steps: u32 = 0, unit = "steps", range = "0 to 100000";
+        /// Coloured light ("cookie"): an EXR (R, G, B multipliers), relative to the pipeline file, projected
+        /// along the light over the shadow map's window (directional) or through the cone (spot); empty: white.
+        light_texture: String = String::new(), unit = "", range = "empty or path to an EXR file";
         /// Output folder name in the output directory; empty means the stage id.
         output: String = String::new(), unit = "", range = "plain folder name";
     }
@@ -170,12 +173,37 @@ impl EpipolarShadows {
         Ok((light, medium))
     }
 
+    /// The light texture: finite, non-negative RGB multipliers.
+    fn texture(&self, id: &str, ctx: &StageContext) -> Result<crate::effects::RgbImage, StageError> {
+        let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
+        let path = ctx.base_dir.join(&self.light_texture);
+        let img = crate::image_io::read_exr_rgb(&path).map_err(|e| {
+            fail(e.to_string(), "give a readable EXR file for light_texture (relative to the pipeline file)")
+        })?;
+        let data = img.rgb(None).ok_or_else(|| {
+            fail(format!("{} has no R, G, B channels", path.display()), "write the texture as channels R, G, B")
+        })?;
+        if let Some(i) = data.iter().position(|c| c.iter().any(|x| !x.is_finite() || *x < 0.0)) {
+            return Err(fail(
+                format!("{}: pixel ({}, {}) is {:?}", path.display(), i % img.width, i / img.width, data[i]),
+                "light texture values must be finite and non-negative",
+            ));
+        }
+        Ok(crate::effects::Image { width: img.width, height: img.height, data })
+    }
+
     /// Runs the stage.
     pub fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
         let fields = self.fields();
         let dir = fields.out_dir(id, ctx)?;
         let v = fields.load(id, ctx, None)?;
-        let (light, medium) = Self::light_and_medium(id, &v.scene)?;
+        let (mut light, medium) = Self::light_and_medium(id, &v.scene)?;
+        if !self.light_texture.is_empty() {
+            let tex = self.texture(id, ctx)?;
+            match &mut light {
+                EpiLight::Directional { texture, .. } | EpiLight::Spot { texture, .. } => *texture = Some(tex),
+            }
+        }
         let bounds = v.scene.bounds().ok_or_else(|| StageError::Input {
             stage: id.into(),
             message: format!("{} has no geometry", v.scene.source.display()),

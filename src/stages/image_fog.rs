@@ -4,7 +4,7 @@
 //!
 //! **Input.** A scene file (relative to the pipeline file) with a perspective camera and global media
 //! (homogeneous or exponential height fog, summed). **Phases.** Import → BVH → G-buffer of the camera
-//! ([`view`](super::view): vacuum colour and distance) → [`image_fog::render`] (per-pixel density
+//! ([`view`]: vacuum colour and distance) → [`image_fog::render`] (per-pixel density
 //! integrals P and spread W, Secs. 3.3 and Eqs. 1, 3; attenuated and scattered images, Sec. 4.1; MIP
 //! chain of the scattered image with the 4-tap Gaussian and level selection, Sec. 4.2; spread-space
 //! chain, masking, Sec. 4.3) → `<out>/<stage>/fog.exr` (layers `attenuated`, `scattered`) with PNG
