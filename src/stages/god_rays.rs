@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use super::view::{self, ViewFields, ms};
+use super::view::{self, ms};
 use super::{StageContext, StageError, StageOutcome};
 use crate::bench::BenchRow;
 use crate::effects::epipolar::{self, EpiLight, EpiMedium, EpipolarOptions, EpipolarStats};
@@ -97,23 +97,9 @@ pub struct GodRaysSummary {
     pub reference: Option<GodRaysCheck>,
 }
 
+super::view::impl_view_fields!(EpipolarShadows);
+
 impl EpipolarShadows {
-    fn fields(&self) -> ViewFields<'_> {
-        ViewFields {
-            scene: &self.scene,
-            camera: self.camera,
-            width: self.width,
-            height: self.height,
-            colour_samples: self.colour_samples,
-            output: &self.output,
-        }
-    }
-
-    /// The scene file resolved against the pipeline's folder.
-    pub fn scene_path(&self, base_dir: &Path) -> std::path::PathBuf {
-        self.fields().scene_path(base_dir)
-    }
-
     /// Range checks.
     pub fn validate(&self) -> Vec<FieldIssue> {
         let mut v = self.fields().validate();

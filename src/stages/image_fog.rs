@@ -135,23 +135,9 @@ pub struct FogSummary {
     pub physics: Option<PhysicsCheck>,
 }
 
+super::view::impl_view_fields!(ImageFogStage);
+
 impl ImageFogStage {
-    fn fields(&self) -> ViewFields<'_> {
-        ViewFields {
-            scene: &self.scene,
-            camera: self.camera,
-            width: self.width,
-            height: self.height,
-            colour_samples: self.colour_samples,
-            output: &self.output,
-        }
-    }
-
-    /// The scene file resolved against the pipeline's folder.
-    pub fn scene_path(&self, base_dir: &Path) -> std::path::PathBuf {
-        self.fields().scene_path(base_dir)
-    }
-
     /// Range checks.
     pub fn validate(&self) -> Vec<FieldIssue> {
         let mut v = self.fields().validate();

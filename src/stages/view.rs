@@ -32,6 +32,31 @@ pub struct ViewFields<'a> {
     pub output: &'a str,
 }
 
+/// Implements `fields()` (the shared [`ViewFields`]) and `scene_path()` for a stage whose resolved
+/// parameters have `scene`, `camera`, `width`, `height`, `colour_samples` and `output`.
+macro_rules! impl_view_fields {
+    ($ty:ty) => {
+        impl $ty {
+            fn fields(&self) -> $crate::stages::view::ViewFields<'_> {
+                $crate::stages::view::ViewFields {
+                    scene: &self.scene,
+                    camera: self.camera,
+                    width: self.width,
+                    height: self.height,
+                    colour_samples: self.colour_samples,
+                    output: &self.output,
+                }
+            }
+
+            /// The scene file resolved against the pipeline's folder.
+            pub fn scene_path(&self, base_dir: &std::path::Path) -> std::path::PathBuf {
+                self.fields().scene_path(base_dir)
+            }
+        }
+    };
+}
+pub(crate) use impl_view_fields;
+
 /// A loaded view.
 pub struct View {
     /// The scene.
