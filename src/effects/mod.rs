@@ -139,6 +139,29 @@ impl ViewCamera {
     }
 }
 
+/// Relative RMSE of `img` against `reference` over pixels and channels (`sqrt(Σ(x−r)²)/sqrt(Σr²)`); `∞` for
+/// mismatching sizes, 0 when both are zero.
+pub fn rel_rmse(img: &RgbImage, reference: &RgbImage) -> f64 {
+    if img.data.len() != reference.data.len() {
+        return f64::INFINITY;
+    }
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for (a, r) in img.data.iter().zip(&reference.data) {
+        for c in 0..3 {
+            let (x, y) = (f64::from(a[c]), f64::from(r[c]));
+            num += (x - y) * (x - y);
+            den += y * y;
+        }
+    }
+    if den > 0.0 {
+        (num / den).sqrt()
+    } else if num > 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -227,7 +227,7 @@ impl EpipolarShadows {
             GodRaysCheck {
                 steps: self.reference_steps,
                 ms: ref_ms,
-                rel_rmse: view::rel_rmse(&out.inscatter, &truth),
+                rel_rmse: crate::effects::rel_rmse(&out.inscatter, &truth),
                 speedup: ref_ms / out.stats.total_ms.max(1e-9),
             }
         });

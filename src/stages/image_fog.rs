@@ -225,7 +225,7 @@ impl ImageFogStage {
                 pixels: pixels.len(),
                 ms: gather_ms,
                 frame_ms,
-                rel_rmse: view::rel_rmse(
+                rel_rmse: crate::effects::rel_rmse(
                     &Image { width: mine.len(), height: 1, data: mine },
                     &Image { width: truth.len(), height: 1, data: truth },
                 ),
@@ -456,8 +456,8 @@ impl ImageFogStage {
         let pt_ms = ms(t0);
         let distance = crate::effects::gbuffer::distance_image(bvh, &cam);
         let out = image_fog::render(&cam, &vacuum, &distance, medium, &self.options());
-        let att = view::rel_rmse(&out.attenuated, &fog);
-        let eff = view::rel_rmse(&out.image, &fog);
+        let att = crate::effects::rel_rmse(&out.attenuated, &fog);
+        let eff = crate::effects::rel_rmse(&out.image, &fog);
         let corrected = |e: f64| (e * e - noise * noise).max(0.0).sqrt();
         Ok(PhysicsCheck {
             size: [w, h],
@@ -466,7 +466,7 @@ impl ImageFogStage {
             reference_rel_stderr: rel_stderr,
             attenuation_only_rel_rmse: att,
             effect_rel_rmse: eff,
-            no_fog_rel_rmse: view::rel_rmse(&vacuum, &fog),
+            no_fog_rel_rmse: crate::effects::rel_rmse(&vacuum, &fog),
             reference_noise: noise,
             attenuation_only_corrected: corrected(att),
             effect_corrected: corrected(eff),
@@ -513,5 +513,5 @@ fn stratified(w: usize, h: usize, n: usize) -> Vec<(usize, usize)> {
     let aspect = w as f64 / h as f64;
     let ny = ((n as f64 / aspect).sqrt().round() as usize).clamp(1, h);
     let nx = (n / ny).clamp(1, w);
-    (0..ny).flat_map(|j| (0..nx).map(move |i| ((2 * i + 1) * w / (2 * nx), (2 * j + 1) * h / (2 * ny)))).collect()
+    image_fog::gather::grid_pixels(w, h, nx, ny)
 }

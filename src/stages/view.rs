@@ -194,18 +194,6 @@ pub fn write_json<T: serde::Serialize>(id: &str, path: &Path, value: &T) -> Resu
     Ok(path.to_path_buf())
 }
 
-/// Relative RMSE of `a` against `truth` over all pixels and channels: `sqrt(Σ(a−t)²) / sqrt(Σt²)`.
-pub fn rel_rmse(a: &RgbImage, truth: &RgbImage) -> f64 {
-    let (mut num, mut den) = (0.0f64, 0.0f64);
-    for (p, q) in a.data.iter().zip(&truth.data) {
-        for c in 0..3 {
-            num += (f64::from(p[c]) - f64::from(q[c])).powi(2);
-            den += f64::from(q[c]).powi(2);
-        }
-    }
-    if den > 0.0 { (num / den).sqrt() } else { num.sqrt() }
-}
-
 /// Milliseconds since `t0`.
 pub fn ms(t0: Instant) -> f64 {
     t0.elapsed().as_secs_f64() * 1e3

@@ -220,9 +220,7 @@ pub fn bench_frames(frames: &[Frame<'_>], medium: &FogMedium, cfg: &BenchConfig)
     let (w, h) = (last.cam.width, last.cam.height);
     let pixels: Vec<(usize, usize)> = match cfg.gather_grid {
         None => (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).collect(),
-        Some((nx, ny)) => (0..ny)
-            .flat_map(|j| (0..nx).map(move |i| ((2 * i + 1) * w / (2 * nx), (2 * j + 1) * h / (2 * ny))))
-            .collect(),
+        Some((nx, ny)) => gather::grid_pixels(w, h, nx, ny),
     };
     let t = Instant::now();
     let p = prepare(&last.cam, last.colour, last.distance, medium);

@@ -112,3 +112,8 @@ pub fn gather_image(
     }
     out
 }
+
+/// Pixel centres of an `nx × ny` stratified grid over a `w × h` image (cell centres, rounded down).
+pub fn grid_pixels(w: usize, h: usize, nx: usize, ny: usize) -> Vec<(usize, usize)> {
+    (0..ny).flat_map(|j| (0..nx).map(move |i| ((2 * i + 1) * w / (2 * nx), (2 * j + 1) * h / (2 * ny)))).collect()
+}
