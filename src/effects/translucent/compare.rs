@@ -1,0 +1,217 @@
+//! Error of the point-based renderer against the path-traced reference, and error against run time
+//! (wang2018 Sec. 6, Table 3, Fig. 23–24).
+//!
+//! **Input → output.** A point-based [`Frame`] and a [`ReferenceImage`] of the same view (with their
+//! run times) → a [`Comparison`]; a quality ladder of both methods → [`Curve`]s of (ms, MSE).
+//!
+//! **Image normalisation.** Both images are divided by `s`, the 99th percentile (nearest rank) of the
+//! reference's object-pixel channel values, so the object's bright end sits near 1 as in a displayed
+//! image (wang2018 reports MSE of displayed pictures without stating the scale). The MSE is the mean of
+//! `(x − r)²/s²` over the object's pixels (where the primary ray hits the object first) and the three
+//! channels.
+//!
+//! **Reference noise.** The reference's MSE against the truth at `n` paths per pixel is its mean
+//! per-pixel variance of the mean, `v/n`; it is subtracted from the measured MSE (`mse_corrected`, the
+//! expected MSE against the noise-free image) and gives the reference's MSE-vs-time line: at equal MSE
+//! `e` the reference needs `n_e = v₁/e` paths per pixel (`v₁` = per-path variance), i.e.
+//! `reference_ms · n_e / n`. When the point-based error is below the reference's own noise the speed-up
+//! is reported as a lower bound (`n_e` from the noise itself).
+
+use serde::{Deserialize, Serialize};
+
+use super::reference::ReferenceImage;
+use super::render::Frame;
+
+/// The point-based frame against the reference.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Comparison {
+    /// Image size.
+    pub size: [usize; 2],
+    /// Object pixels compared.
+    pub object_pixels: usize,
+    /// Reference paths per pixel.
+    pub samples: u32,
+    /// Normalisation `s` \[W/(m²·sr)\] (module doc).
+    pub scale: f64,
+    /// MSE of the full image over the object's pixels (normalised).
+    pub mse: f64,
+    /// The reference's own noise in the same units (mean variance of its mean).
+    pub reference_noise: f64,
+    /// `max(mse − reference_noise, 0)`.
+    pub mse_corrected: f64,
+    /// Per component against the reference's paths with the same number of medium events: single vs
+    /// one, double vs two, multiple + bounced vs three or more, rest vs none (normalised MSE, noise not
+    /// removed).
+    pub mse_components: [f64; 4],
+    /// Point-based time (pre-processing and frame) \[ms\].
+    pub point_ms: f64,
+    /// Reference time \[ms\].
+    pub reference_ms: f64,
+    /// Reference time to reach `mse_corrected` \[ms\].
+    pub equal_mse_reference_ms: f64,
+    /// `equal_mse_reference_ms / point_ms`.
+    pub speedup: f64,
+    /// The point-based error is below a tenth of the reference's noise: the speed-up is a lower bound.
+    pub lower_bound: bool,
+}
+
+/// The normalisation `s` of the module doc (1 when the object is black or absent).
+pub fn scale_of(reference: &ReferenceImage) -> f64 {
+    let total = reference.total();
+    let mut v: Vec<f64> = total
+        .iter()
+        .zip(&reference.object)
+        .filter(|(_, o)| **o)
+        .flat_map(|(p, _)| p.iter().copied())
+        .filter(|x| x.is_finite())
+        .collect();
+    if v.is_empty() {
+        return 1.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let s = v[((0.99 * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1];
+    if s > 0.0 { s } else { 1.0 }
+}
+
+/// Normalised MSE of `a` against `b` over the masked pixels.
+fn mse(a: &[[f64; 3]], b: &[[f64; 3]], mask: &[bool], scale: f64) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((x, y), m) in a.iter().zip(b).zip(mask) {
+        if *m {
+            for c in 0..3 {
+                let d = (x[c] - y[c]) / scale;
+                sum += d * d;
+            }
+            n += 3;
+        }
+    }
+    if n == 0 { 0.0 } else { sum / n as f64 }
+}
+
+/// Mean normalised variance of the reference's mean over the masked pixels.
+pub fn noise(reference: &ReferenceImage, mask: &[bool], scale: f64) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (v, m) in reference.variance.iter().zip(mask) {
+        if *m {
+            sum += v.iter().sum::<f64>() / (scale * scale);
+            n += 3;
+        }
+    }
+    if n == 0 { 0.0 } else { sum / n as f64 }
+}
+
+/// Compares a frame with the reference of the same view (module doc).
+pub fn compare(frame: &Frame, point_ms: f64, reference: &ReferenceImage, reference_ms: f64) -> Comparison {
+    let scale = scale_of(reference);
+    let mask = &reference.object;
+    let measured = mse(&frame.total(), &reference.total(), mask, scale);
+    let ref_noise = noise(reference, mask, scale);
+    let corrected = (measured - ref_noise).max(0.0);
+    let multiple: Vec<[f64; 3]> =
+        frame.multiple.iter().zip(&frame.bounced).map(|(m, b)| std::array::from_fn(|c| m[c] + b[c])).collect();
+    let c = &reference.components;
+    let mse_components = [
+        mse(&frame.single, &c[1], mask, scale),
+        mse(&frame.double, &c[2], mask, scale),
+        mse(&multiple, &c[3], mask, scale),
+        mse(&frame.rest, &c[0], mask, scale),
+    ];
+    let samples = (reference.paths / (reference.width * reference.height).max(1) as u64).max(1) as u32;
+    // Per-path variance v₁ = noise · n; paths needed for MSE e: v₁/e.
+    let per_path = ref_noise * samples as f64;
+    // `measured − noise` estimates the true MSE without bias; with ≥ 1000 pixel channels the noise
+    // itself is known to a few per cent, so the estimate is used down to a tenth of the noise and below
+    // that only a lower bound is claimed.
+    let lower_bound = corrected <= 0.1 * ref_noise;
+    let target = if lower_bound { 0.1 * ref_noise } else { corrected };
+    let n_eq = if target > 0.0 { per_path / target } else { samples as f64 };
+    let equal_ms = reference_ms * n_eq / samples as f64;
+    Comparison {
+        size: [reference.width, reference.height],
+        object_pixels: mask.iter().filter(|m| **m).count(),
+        samples,
+        scale,
+        mse: measured,
+        reference_noise: ref_noise,
+        mse_corrected: corrected,
+        mse_components,
+        point_ms,
+        reference_ms,
+        equal_mse_reference_ms: equal_ms,
+        speedup: equal_ms / point_ms.max(1e-9),
+        lower_bound,
+    }
+}
+
+/// One method's error against run time.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Curve {
+    /// Method and material.
+    pub name: String,
+    /// (setting, ms, normalised MSE against the converged reference with its noise removed).
+    pub points: Vec<(String, f64, f64)>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reference(values: Vec<[f64; 3]>, variance: Vec<[f64; 3]>, object: Vec<bool>, samples: u64) -> ReferenceImage {
+        let n = values.len();
+        ReferenceImage {
+            width: n,
+            height: 1,
+            components: [vec![[0.0; 3]; n], values, vec![[0.0; 3]; n], vec![[0.0; 3]; n]],
+            variance,
+            object,
+            paths: samples * n as u64,
+            nonfinite: 0,
+            seconds: 1.0,
+        }
+    }
+
+    #[test]
+    fn scale_is_the_99th_percentile_of_object_values() {
+        // 100 object pixels with values 1..=100 in every channel, one bright non-object pixel.
+        let mut vals: Vec<[f64; 3]> = (1..=100).map(|i| [i as f64; 3]).collect();
+        vals.push([1e6; 3]);
+        let mut obj = vec![true; 100];
+        obj.push(false);
+        let r = reference(vals, vec![[0.0; 3]; 101], obj, 16);
+        // 300 values; nearest rank ⌈0.99·300⌉ = 297 → value 99.
+        assert_eq!(scale_of(&r), 99.0);
+    }
+
+    #[test]
+    fn noise_is_removed_and_the_speedup_follows_the_reference_line() {
+        // Reference: every object pixel 2.0 with variance of the mean 0.04 (per channel) at 16 paths.
+        let n = 10;
+        let r = reference(vec![[2.0; 3]; n], vec![[0.04; 3]; n], vec![true; n], 16);
+        let frame = Frame {
+            width: n,
+            height: 1,
+            single: vec![[2.2; 3]; n],
+            double: vec![[0.0; 3]; n],
+            multiple: vec![[0.0; 3]; n],
+            bounced: vec![[0.0; 3]; n],
+            rest: vec![[0.0; 3]; n],
+            object: vec![true; n],
+            times: Default::default(),
+            stats: Default::default(),
+        };
+        let c = compare(&frame, 10.0, &r, 1000.0);
+        // s = 2: MSE = (0.2/2)² = 0.01; noise = 0.04/4 = 0.01 → corrected 0 → lower bound at a tenth
+        // of the noise.
+        assert!((c.mse - 0.01).abs() < 1e-12);
+        assert!((c.reference_noise - 0.01).abs() < 1e-12);
+        assert!(c.lower_bound);
+        // At MSE 0.001 the reference needs 10 × its 16 paths: 10 000 ms against 10 ms → 1000×.
+        assert!((c.speedup - 1000.0).abs() < 1e-6);
+        assert!((c.mse_components[0] - 0.01).abs() < 1e-12);
+        // A frame off by 0.4 (MSE 0.04, corrected 0.03): the reference needs 16 · 0.01/0.03 paths.
+        let far = Frame { single: vec![[2.4; 3]; n], ..frame };
+        let c = compare(&far, 10.0, &r, 1000.0);
+        assert!(!c.lower_bound && (c.mse_corrected - 0.03).abs() < 1e-12);
+        assert!((c.speedup - 1000.0 / 3.0 / 10.0).abs() < 1e-9);
+    }
+}
