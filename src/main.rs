@@ -165,6 +165,11 @@ enum Command {
         /// slopes; fog frame times at 720p and 1080p and the speed-up over the gathering reference.
         #[arg(long)]
         effects: bool,
+        /// Only the translucent-media benchmark of the pipeline's TranslucentRender stages: wang2018 Table 3's
+        /// time split per material at the stage's size, memory, naive vs two-step traversal, and the
+        /// speed-up over path tracing at equal MSE.
+        #[arg(long)]
+        translucent: bool,
         /// Where the bake's tables are compiled (cached).
         #[arg(long, default_value = "out")]
         tables: PathBuf,
@@ -634,7 +639,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 }
             }
         }
-        Command::Bench { pipeline, json, only, tables_only, rays, rays_only, bake, effects, tables } => {
+        Command::Bench { pipeline, json, only, tables_only, rays, rays_only, bake, effects, translucent, tables } => {
             let mut rows = Vec::new();
             if bake {
                 if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
@@ -643,6 +648,20 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                     for s in p.stages() {
                         if let voltab::stages::StageDef::BakeLightmaps(b) = s.def() {
                             rows.extend(b.bench(s.id(), &ctx)?);
+                        }
+                    }
+                }
+            } else if translucent {
+                if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
+                    let base = base_dir(&p);
+                    let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                    for s in p.stages() {
+                        if let voltab::stages::StageDef::TranslucentRender(t) = s.def() {
+                            let (text, r) = t.bench(s.id(), &ctx)?;
+                            if !json {
+                                println!("{text}");
+                            }
+                            rows.extend(r);
                         }
                     }
                 }

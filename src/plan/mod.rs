@@ -529,6 +529,50 @@ fn plan_ms_lobes(t: &ValidatedTable, d: &MsLobes, needs: &Needs) -> TablePlan {
 
 /// A screen-space effect stage renders its own scene: it runs when that scene is among the planned
 /// scenes and has what the effect needs (`lacks` names what is missing).
+/// What a scene lacks for a `TranslucentRender` stage: a refractive object bounding a medium, or a
+/// point or sphere light.
+fn translucent_lacks(sc: &Scene, t: &crate::stages::translucent::TranslucentRender) -> Option<&'static str> {
+    let bvh = crate::scene::bvh::SceneBvh::build(sc);
+    if crate::effects::translucent::find_object(sc, &bvh).is_none() {
+        Some("closed dielectric mesh bounding a medium")
+    } else if crate::effects::translucent::emitters(sc, t.light_radius).0.is_empty() {
+        Some("point or sphere light")
+    } else {
+        None
+    }
+}
+
+/// The materials of `TranslucentRender` stages whose scene is planned: the `MsLobes` slices they read
+/// are needs like the scenes' own translucent media.
+fn translucent_stage_needs(p: &ValidatedPipeline, scenes: &[Scene]) -> Vec<MediumNeed> {
+    let base = p.path().parent().unwrap_or(std::path::Path::new("")).to_path_buf();
+    let mut out = Vec::new();
+    for s in p.stages() {
+        let StageDef::TranslucentRender(t) = s.def() else { continue };
+        let path = t.scene_path(&base);
+        let planned = scenes.iter().any(|sc| match (sc.source.canonicalize(), path.canonicalize()) {
+            (Ok(x), Ok(y)) => x == y,
+            _ => sc.source == path,
+        });
+        if !planned {
+            continue;
+        }
+        for name in t.materials.iter().filter(|m| m.as_str() != "Scene") {
+            if let Some(m) = crate::tables::ms_lobes::material(name) {
+                out.push(MediumNeed {
+                    name: format!("{name} (stage {})", s.id()),
+                    g: [m.g; 3],
+                    albedo: m.albedo,
+                    sigma_t_max: 0.0,
+                    optical_extent: 0.0,
+                    heterogeneous: false,
+                });
+            }
+        }
+    }
+    out
+}
+
 fn effect_stage(
     s: &ValidatedStage,
     effect: &str,
@@ -556,7 +600,8 @@ fn effect_stage(
 impl Plan {
     /// Plans a pipeline for scenes (their union of needs).
     pub fn new(p: &ValidatedPipeline, scenes: &[Scene]) -> Plan {
-        let needs = Needs::of(scenes);
+        let mut needs = Needs::of(scenes);
+        needs.translucent.extend(translucent_stage_needs(p, scenes));
         let tables: Vec<TablePlan> = p
             .tables()
             .iter()
@@ -594,6 +639,17 @@ impl Plan {
                         None
                     }
                 }),
+                StageDef::TranslucentRender(t) if !tables.iter().any(|tp| tp.id == t.table && tp.def.is_some()) => {
+                    StagePlan {
+                        id: s.id().to_string(),
+                        decision: Decision::Skip,
+                        reason: format!("its table {} is skipped", t.table),
+                        def: None,
+                    }
+                }
+                StageDef::TranslucentRender(t) => {
+                    effect_stage(s, "translucent media", &t.scene, p, scenes, |sc| translucent_lacks(sc, t))
+                }
                 StageDef::ImageFog(f) => effect_stage(s, "image-space fog", &f.scene, p, scenes, |sc| {
                     crate::effects::image_fog::FogMedium::from_scene(sc).is_none().then_some("global medium")
                 }),

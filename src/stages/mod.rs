@@ -9,6 +9,7 @@ pub mod bake;
 pub mod god_rays;
 pub mod image_fog;
 pub mod plot_phase;
+pub mod translucent;
 pub mod view;
 
 use std::path::{Path, PathBuf};
@@ -29,6 +30,8 @@ pub enum StageDecl {
     EpipolarShadows(god_rays::EpipolarShadowsRaw),
     /// Applies image-space multiple-scattering fog to a view of a scene (iser2018).
     ImageFog(image_fog::ImageFogRaw),
+    /// Renders a scene's translucent object with point-based light samples and an `MsLobes` table (wang2018).
+    TranslucentRender(translucent::TranslucentRenderRaw),
 }
 
 /// A resolved stage definition.
@@ -43,6 +46,8 @@ pub enum StageDef {
     EpipolarShadows(god_rays::EpipolarShadows),
     /// See [`image_fog`].
     ImageFog(image_fog::ImageFogStage),
+    /// See [`translucent`].
+    TranslucentRender(translucent::TranslucentRender),
 }
 
 /// Where a stage runs.
@@ -109,6 +114,7 @@ impl StageDecl {
             StageDecl::BakeLightmaps(_) => bake::BakeLightmapsRaw::KIND,
             StageDecl::EpipolarShadows(_) => god_rays::EpipolarShadowsRaw::KIND,
             StageDecl::ImageFog(_) => image_fog::ImageFogRaw::KIND,
+            StageDecl::TranslucentRender(_) => translucent::TranslucentRenderRaw::KIND,
         }
     }
     /// The entry's id.
@@ -118,6 +124,7 @@ impl StageDecl {
             StageDecl::BakeLightmaps(r) => r.id.as_deref(),
             StageDecl::EpipolarShadows(r) => r.id.as_deref(),
             StageDecl::ImageFog(r) => r.id.as_deref(),
+            StageDecl::TranslucentRender(r) => r.id.as_deref(),
         }
     }
     /// Fills defaults.
@@ -127,6 +134,7 @@ impl StageDecl {
             StageDecl::BakeLightmaps(r) => StageDef::BakeLightmaps(r.resolve()),
             StageDecl::EpipolarShadows(r) => StageDef::EpipolarShadows(r.resolve()),
             StageDecl::ImageFog(r) => StageDef::ImageFog(r.resolve()),
+            StageDecl::TranslucentRender(r) => StageDef::TranslucentRender(r.resolve()),
         }
     }
 }
@@ -139,6 +147,7 @@ impl StageDef {
             StageDef::BakeLightmaps(_) => bake::BakeLightmapsRaw::KIND,
             StageDef::EpipolarShadows(_) => god_rays::EpipolarShadowsRaw::KIND,
             StageDef::ImageFog(_) => image_fog::ImageFogRaw::KIND,
+            StageDef::TranslucentRender(_) => translucent::TranslucentRenderRaw::KIND,
         }
     }
     /// (field, referenced table id, required table kind) for every table this stage reads.
@@ -150,6 +159,9 @@ impl StageDef {
                 .map(|t| ("table", t.to_string(), crate::tables::zh_response::ZhResponseRaw::KIND))
                 .into_iter()
                 .collect(),
+            StageDef::TranslucentRender(t) => {
+                vec![("table", t.table.clone(), crate::tables::ms_lobes::MsLobesRaw::KIND)]
+            }
             StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) => Vec::new(),
         }
     }
@@ -160,6 +172,7 @@ impl StageDef {
             StageDef::BakeLightmaps(b) => b.validate(),
             StageDef::EpipolarShadows(e) => e.validate(),
             StageDef::ImageFog(f) => f.validate(),
+            StageDef::TranslucentRender(t) => t.validate(),
         }
     }
     /// Scene files the stage reads, resolved against `base_dir` (the pipeline's folder).
@@ -169,6 +182,7 @@ impl StageDef {
             StageDef::BakeLightmaps(b) => vec![b.scene_path(base_dir)],
             StageDef::EpipolarShadows(e) => vec![e.scene_path(base_dir)],
             StageDef::ImageFog(f) => vec![f.scene_path(base_dir)],
+            StageDef::TranslucentRender(t) => vec![t.scene_path(base_dir)],
         }
     }
     /// Error against run time for stages that have a reference (`voltab report --stages`): Markdown text,
@@ -182,6 +196,7 @@ impl StageDef {
             }
             StageDef::EpipolarShadows(e) => e.report(id, ctx, report_dir).map(Some),
             StageDef::ImageFog(f) => f.report(id, ctx, report_dir).map(Some),
+            StageDef::TranslucentRender(t) => t.report(id, ctx, report_dir).map(Some),
         }
     }
     /// Runs the stage on tables compiled into `ctx.out_dir`.
@@ -191,6 +206,7 @@ impl StageDef {
             StageDef::BakeLightmaps(b) => b.run(id, ctx),
             StageDef::EpipolarShadows(e) => e.run(id, ctx),
             StageDef::ImageFog(f) => f.run(id, ctx),
+            StageDef::TranslucentRender(t) => t.run(id, ctx),
         }
     }
 }
