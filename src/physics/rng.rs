@@ -54,6 +54,28 @@ impl SampleStream {
     }
 }
 
+/// The dimensions of one [`SampleStream`] drawn in order: a Monte-Carlo path's random numbers.
+#[derive(Debug, Clone, Copy)]
+pub struct Draws {
+    stream: SampleStream,
+    dim: u32,
+}
+
+impl Draws {
+    /// Starts at dimension 0.
+    pub fn new(stream: SampleStream) -> Self {
+        Draws { stream, dim: 0 }
+    }
+
+    /// The next dimension's uniform value in [0, 1).
+    #[inline]
+    pub fn draw(&mut self) -> f64 {
+        let u = self.stream.uniform(self.dim);
+        self.dim = self.dim.wrapping_add(1);
+        u
+    }
+}
+
 /// SplitMix64 finaliser: a bijection on u64 with full avalanche.
 #[inline]
 fn mix(mut z: u64) -> u64 {

@@ -263,11 +263,7 @@ impl TranslucentRender {
         for name in &self.materials {
             let material = loaded.material(id, name, self.mfp_scale)?;
             let setup = loaded.setup(material);
-            let fail = |message: String| StageError::Input {
-                stage: id.into(),
-                message: format!("material {name}: {message}"),
-                help: "check the material and the table's g and albedo coverage (voltab plan)".into(),
-            };
+            let fail = material_error(id, name);
             let (frame, prep) = self.render_frame(&setup, &table, &cam, ctx.progress).map_err(fail)?;
             outputs.extend(write_frame(id, &dir, name, &frame)?);
             let comparison = if self.reference_samples > 0 {
@@ -352,11 +348,7 @@ impl TranslucentRender {
         let w = self.reference_width as usize;
         let h = ((w as f64) * cam.height as f64 / cam.width as f64).round().max(1.0) as usize;
         let small = ViewCamera { width: w, height: h, ..*cam };
-        let fail = |message: String| StageError::Input {
-            stage: id.into(),
-            message: format!("material {name}: {message}"),
-            help: "check the material and the table's coverage".into(),
-        };
+        let fail = material_error(id, name);
         let t0 = Instant::now();
         let (frame, prep) = self.render_frame(setup, table, &small, false).map_err(fail)?;
         let point_ms = ms(t0);
@@ -407,6 +399,15 @@ impl TranslucentRender {
             path,
             message: format!("{e} (the materials need (albedo, g) = {needs:?})"),
         })
+    }
+}
+
+/// The error of rendering material `name` (the renderer's message, with the fix).
+fn material_error<'a>(id: &'a str, name: &'a str) -> impl Fn(String) -> StageError + Copy + 'a {
+    move |message| StageError::Input {
+        stage: id.into(),
+        message: format!("material {name}: {message}"),
+        help: "check the material and the table's g and albedo coverage (voltab plan)".into(),
     }
 }
 
@@ -523,11 +524,7 @@ impl TranslucentRender {
         for name in &self.materials {
             let material = loaded.material(id, name, self.mfp_scale)?;
             let setup = loaded.setup(material);
-            let fail = |message: String| StageError::Input {
-                stage: id.into(),
-                message: format!("material {name}: {message}"),
-                help: "check the material and the table's coverage".into(),
-            };
+            let fail = material_error(id, name);
             let truth = reference::render(
                 &setup,
                 &small,
@@ -627,11 +624,7 @@ impl TranslucentRender {
         for name in &self.materials {
             let material = loaded.material(id, name, self.mfp_scale)?;
             let setup = loaded.setup(material);
-            let fail = |message: String| StageError::Input {
-                stage: id.into(),
-                message: format!("material {name}: {message}"),
-                help: "check the material and the table's coverage".into(),
-            };
+            let fail = material_error(id, name);
             let (frame, prep) = self.render_frame(&setup, &table, &cam, false).map_err(fail)?;
             let naive = TranslucentRender { two_step: false, ..self.clone() };
             let (frame_naive, _) = naive.render_frame(&setup, &table, &cam, false).map_err(fail)?;

@@ -84,7 +84,7 @@ use rayon::prelude::*;
 use super::{Emitter, Material, Setup, fresnel, reflect, refract};
 use crate::effects::ViewCamera;
 use crate::physics::hg;
-use crate::physics::rng::{SampleStream, StreamKey};
+use crate::physics::rng::{Draws, StreamKey};
 use crate::scene::bvh::{Hit, Ray};
 
 /// Fixed-point iterations of the light-guided direction through the refractive boundary.
@@ -231,20 +231,6 @@ struct PixelResult {
     object: bool,
     paths: u64,
     nonfinite: u64,
-}
-
-/// Consecutive dimensions of one path's stream.
-struct Draws {
-    stream: SampleStream,
-    dim: u32,
-}
-
-impl Draws {
-    fn next(&mut self) -> f64 {
-        let u = self.stream.uniform(self.dim);
-        self.dim = self.dim.wrapping_add(1);
-        u
-    }
 }
 
 /// A guide cone of one emitter at one medium vertex.
@@ -411,7 +397,7 @@ impl<'a> Tracer<'a> {
         let mut scratch = Vec::with_capacity(self.emitters.len());
         for s in 0..samples {
             r.paths += 1;
-            let mut draws = Draws { stream: key.sample(u64::from(s)), dim: 0 };
+            let mut draws = Draws::new(key.sample(u64::from(s)));
             let c = self.trace(o, d, inside, &mut draws, &mut scratch);
             if c.iter().flatten().any(|v| !v.is_finite()) {
                 r.nonfinite += 1;
@@ -476,7 +462,7 @@ impl<'a> Tracer<'a> {
             events += 1;
             if events > RR_START {
                 let q = st.beta.iter().fold(0.0f64, |m, &b| m.max(b)).min(1.0);
-                if q <= 0.0 || draws.next() >= q {
+                if q <= 0.0 || draws.draw() >= q {
                     break;
                 }
                 st.beta = st.beta.map(|b| b / q);
@@ -484,10 +470,10 @@ impl<'a> Tracer<'a> {
             if let Some(t) = collision {
                 let x = st.o + t * st.d;
                 st.scatters += 1;
-                if self.guide > 0.0 && draws.next() < self.guide {
+                if self.guide > 0.0 && draws.draw() < self.guide {
                     self.connect(&mut st, x, draws, scratch);
                 }
-                let (u, v) = (draws.next(), draws.next());
+                let (u, v) = (draws.draw(), draws.draw());
                 let w = around(st.d, hg::sample_mu(u, self.mat.g), 2.0 * PI * v);
                 if !w.is_finite() {
                     break;
@@ -511,7 +497,7 @@ impl<'a> Tracer<'a> {
                 let ior = self.mat.ior;
                 let (eta_i, eta_t) = if h.front_face { (1.0, ior) } else { (ior, 1.0) };
                 let f = fresnel(st.d.dot(n).abs(), eta_i, eta_t);
-                let refracted = if draws.next() < f { None } else { refract(st.d, n, eta_i, eta_t) };
+                let refracted = if draws.draw() < f { None } else { refract(st.d, n, eta_i, eta_t) };
                 match refracted {
                     Some(t) => {
                         let s = (eta_i / eta_t) * (eta_i / eta_t);
@@ -542,7 +528,7 @@ impl<'a> Tracer<'a> {
                     self.next_event(&mut st, p, side, k, draws);
                     st.nee_done = true;
                 }
-                let (u, v) = (draws.next(), draws.next());
+                let (u, v) = (draws.draw(), draws.draw());
                 let mu = u.sqrt();
                 st.d = around(side, mu, 2.0 * PI * v);
                 st.beta = [0, 1, 2].map(|c| st.beta[c] * k[c]);
@@ -592,8 +578,8 @@ impl<'a> Tracer<'a> {
             st.beta = [0, 1, 2].map(|c| st.beta[c] * (-sigma[c] * t_hit).exp());
             return None;
         }
-        let hero = ((draws.next() * 3.0) as usize).min(2);
-        let xi = draws.next();
+        let hero = ((draws.draw() * 3.0) as usize).min(2);
+        let xi = draws.draw();
         let t_c = -(1.0 - xi).ln() / sigma[hero];
         let collided = t_c < t_hit;
         let t_end = if collided { t_c } else { t_hit };
@@ -619,7 +605,7 @@ impl<'a> Tracer<'a> {
     fn next_event(&self, st: &mut PathState, p: DVec3, side: DVec3, k: [f64; 3], draws: &mut Draws) {
         let origin = p + side * eps(p);
         for e in &self.emitters {
-            let (u, v) = (draws.next(), draws.next());
+            let (u, v) = (draws.draw(), draws.draw());
             let to_c = e.center - origin;
             let d2 = to_c.length_squared();
             let r2 = e.radius * e.radius;
@@ -688,7 +674,7 @@ impl<'a> Tracer<'a> {
     /// every emitter met on the way inside or on the flight after the refraction out, weighted
     /// `phase / (phase + guide · p_guide)` (balance heuristic against the HG continuation).
     fn connect(&self, st: &mut PathState, x: DVec3, draws: &mut Draws, cones: &mut Vec<Cone>) {
-        let (u0, u1, u2) = (draws.next(), draws.next(), draws.next());
+        let (u0, u1, u2) = (draws.draw(), draws.draw(), draws.draw());
         self.cones(x, cones);
         if cones.is_empty() {
             return;

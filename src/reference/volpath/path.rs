@@ -59,7 +59,7 @@ use super::VolPathOptions;
 use super::flight::{self, Flight};
 use super::lights::{self, LightSample, PreparedLight};
 use crate::physics::hg;
-use crate::physics::rng::SampleStream;
+use crate::physics::rng::{Draws, SampleStream};
 use crate::scene::bvh::{Hit, MediumSegment, Ray, SceneBvh};
 use crate::scene::{Scene, Surface};
 
@@ -84,20 +84,6 @@ pub struct Context<'a> {
     media: bool,
     /// Length scale of the scene \[m\] for ray-origin offsets.
     scale: f64,
-}
-
-/// Random numbers of one path, drawn in order.
-struct Draws {
-    stream: SampleStream,
-    dim: u32,
-}
-
-impl Draws {
-    fn next(&mut self) -> f64 {
-        let u = self.stream.uniform(self.dim);
-        self.dim = self.dim.wrapping_add(1);
-        u
-    }
 }
 
 /// Where a path starts.
@@ -314,8 +300,8 @@ impl<'a> Context<'a> {
     /// One path's sample from `start`: irradiance at a receiver, or radiance arriving along a camera
     /// ray (module doc). Both share this loop; only vertex 0 differs.
     pub fn trace(&self, start: Start, stream: SampleStream, rays: &mut u64) -> [f64; 3] {
-        let mut draws = Draws { stream, dim: 0 };
-        let hero = ((draws.next() * 3.0) as usize).min(2);
+        let mut draws = Draws::new(stream);
+        let hero = ((draws.draw() * 3.0) as usize).min(2);
         let mut st = State { hero, beta: [1.0; 3], r_u: [1.0; 3] };
         let mut out = [0.0; 3];
         // A camera path's vertex 0 is the eye, so its user-facing vertex indices start at 1.
@@ -334,7 +320,7 @@ impl<'a> Context<'a> {
         loop {
             self.next_event(&vertex, &st, &mut draws, &mut out, rays);
             // Direction sampling: throughput and per-channel pdf ratios.
-            let (u1, u2) = (draws.next(), draws.next());
+            let (u1, u2) = (draws.draw(), draws.draw());
             let r_prefix = st.r_u;
             let (origin, dir, p_dir_hero) = match vertex {
                 // The given ray: probability 1 for every channel, and no light sample can produce it.
@@ -369,7 +355,7 @@ impl<'a> Context<'a> {
                 return out;
             }
             // Russian roulette on the MIS-weighted throughput.
-            let xi_rr = draws.next();
+            let xi_rr = draws.draw();
             if depth >= budget.rr {
                 let w = st.beta.iter().fold(0.0f64, |m, &b| m.max(b)) / State::mean(st.r_u);
                 let q = (w / budget.unit).min(1.0);
@@ -403,7 +389,7 @@ impl<'a> Context<'a> {
             Vertex::Medium { p, .. } => (p, p),
         };
         for light in &self.lights {
-            let (u, v) = (draws.next(), draws.next());
+            let (u, v) = (draws.draw(), draws.draw());
             let Some(s) = light.sample(p, u, v) else { continue };
             if s.value.iter().all(|&x| x.is_nan() || x <= 0.0) {
                 continue;
@@ -481,7 +467,7 @@ impl<'a> Context<'a> {
             let ray = Ray { origin: origin.to_array(), direction: dir.to_array(), t_min: 0.0, t_max: f64::INFINITY };
             let hit = self.closest(&ray, rays);
             let t_end = hit.map_or(f64::INFINITY, |h| h.t);
-            let xi = draws.next();
+            let xi = draws.draw();
             let segs: Vec<MediumSegment> = if self.media {
                 *rays += 1;
                 self.bvh.media_segments(self.scene, &ray, t_end)
@@ -536,7 +522,7 @@ impl<'a> Context<'a> {
                 SurfaceKind::Dielectric(ior) => {
                     *depth += 1;
                     let (eta_from, eta_to) = if hit.front_face { (1.0, ior) } else { (ior, 1.0) };
-                    let xi = draws.next();
+                    let xi = draws.draw();
                     let cos_i = -dir.dot(side);
                     let eta = eta_from / eta_to;
                     let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
@@ -573,8 +559,8 @@ impl<'a> Context<'a> {
         rays: &mut u64,
     ) {
         for light in &self.lights {
-            let xi = draws.next();
-            let (u, v) = (draws.next(), draws.next());
+            let xi = draws.draw();
+            let (u, v) = (draws.draw(), draws.draw());
             let Some(lp) = light.position().filter(|_| !segs.is_empty()) else { continue };
             let Some(t) = leg.sample(lp, xi) else { continue };
             let pe = leg.pdf(lp, t);
