@@ -244,7 +244,8 @@ impl TranslucentRender {
         for name in &self.materials {
             if let Some(m) = crate::tables::ms_lobes::material(name) {
                 out.extend(m.albedo.iter().map(|&a| (a, m.g)));
-            } else if let Some(med) = scene.and_then(scene_medium) {
+            } else if let Some(med) = scene.and_then(|s| scene_medium(s, 1.0)) {
+                // The index of refraction does not enter the table: any value does here.
                 out.extend((0..3).map(|c| (med.albedo[c], med.g)));
             }
         }
@@ -411,13 +412,11 @@ fn material_error<'a>(id: &'a str, name: &'a str) -> impl Fn(String) -> StageErr
     }
 }
 
-/// The medium inside the scene's translucent object, as a material (ior 1 placeholder replaced by the
-/// caller).
-fn scene_medium(scene: &Scene) -> Option<Material> {
-    let bvh_free = scene.media.iter().find(|m| matches!(m.boundary, crate::scene::Boundary::Mesh(_)))?;
-    let st = bvh_free.sigma_t();
-    let g = bvh_free.g.iter().sum::<f64>() / 3.0;
-    Some(Material { sigma_t: st, albedo: bvh_free.albedo(), g, ior: 1.0 })
+/// The medium inside the scene's translucent object with the object's index of refraction `ior` (the
+/// channels' mean g: the renderer takes one g).
+fn scene_medium(scene: &Scene, ior: f64) -> Option<Material> {
+    let m = scene.media.iter().find(|m| matches!(m.boundary, crate::scene::Boundary::Mesh(_)))?;
+    Some(Material { sigma_t: m.sigma_t(), albedo: m.albedo(), g: m.g.iter().sum::<f64>() / 3.0, ior })
 }
 
 /// A loaded scene with its translucent object and emitters.
@@ -440,7 +439,7 @@ impl Loaded {
     /// The material called `name` (a preset, or `Scene`).
     pub fn material(&self, id: &str, name: &str, mfp_scale: f64) -> Result<Material, StageError> {
         let m = if name == "Scene" {
-            scene_medium(&self.scene).map(|m| Material { ior: self.ior, ..m })
+            scene_medium(&self.scene, self.ior)
         } else {
             Material::preset(name, mfp_scale, self.ior)
         };
