@@ -17,6 +17,7 @@
 pub mod epipolar;
 pub mod gbuffer;
 pub mod image_fog;
+pub mod pop;
 pub mod translucent;
 
 use glam::DVec3;

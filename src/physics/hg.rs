@@ -121,6 +121,33 @@ pub fn cdf_per_azimuth(mu: f64, g: f64) -> f64 {
     cdf(mu, g) / TAU
 }
 
+/// elek2014's six-neighbour partition of a radiance lobe `f_hg(ω·d, a)` (Sec. 4.2, Eqs. 2–3):
+/// the fractions `[front, side, back]` of its energy inside the cone `θ ∈ [0, π/4]` about `d`
+/// (the cell in front), inside one of the four quarter-azimuth sectors `θ ∈ [π/4, 3π/4]`,
+/// `|φ1 − φ2| = π/2` (each cell beside), and inside `θ ∈ [3π/4, π]` (the cell behind).
+///
+/// Eq. 2's `|φ1 − φ2| · (F_hg(cos θ1) − F_hg(cos θ2))` with [`cdf`] (`= 2π F_hg`), so
+/// `front + 4 side + back = 1` up to rounding: the partition conserves energy exactly. `a` is the
+/// lobe's anisotropy in `[−1, 1]`; `a = ±1` (Dirac lobes along `±d`, elek2014 Sec. 4.1) give
+/// `[1, 0, 0]` and `[0, 0, 1]`. `a` is clamped to `[−1, 1]`; `NaN` gives `NaN`s.
+pub fn pop_partition(a: f64) -> [f64; 3] {
+    if a.is_nan() {
+        return [f64::NAN; 3];
+    }
+    if a >= 1.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    if a <= -1.0 {
+        return [0.0, 0.0, 1.0];
+    }
+    let c = std::f64::consts::FRAC_1_SQRT_2;
+    // 1 − P(M ≤ c | a) = P(M ≤ −c | −a) by mirror symmetry: no cancellation near a → 1.
+    let front = cdf(-c, -a);
+    let back = cdf(-c, a);
+    let side = ((1.0 - front - back) * 0.25).max(0.0);
+    [front, side, back]
+}
+
 /// Inverse of [`cdf`]: the scattering cosine `μ` with `P(M ≤ μ) = ξ` (importance sampling).
 ///
 /// The textbook inverse `μ = (1 + g² − ((1 − g²)/(1 − g + 2gξ))²) / (2g)` cancels for small
@@ -239,6 +266,29 @@ pub fn zh_coefficient(l: u32, g: f64) -> f64 {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn pop_partition_sums_to_one_and_has_exact_limits() {
+        for &a in &[-1.0, -0.999_999, -0.5, -1e-12, 0.0, 1e-12, 0.3, 0.9, 0.99, 0.999_999, 1.0] {
+            let [f, s, b] = pop_partition(a);
+            assert!((f + 4.0 * s + b - 1.0).abs() < 4e-16, "a = {a}");
+            assert!(f >= 0.0 && s >= 0.0 && b >= 0.0);
+        }
+        // Isotropic: solid-angle fractions of the cones, 2π(1 − cos π/4)/4π each.
+        let cone = (1.0 - std::f64::consts::FRAC_1_SQRT_2) / 2.0;
+        let [f, s, b] = pop_partition(0.0);
+        assert!((f - cone).abs() < 1e-16 && (b - cone).abs() < 1e-16);
+        assert!((s - std::f64::consts::FRAC_1_SQRT_2 / 4.0).abs() < 1e-16);
+        assert_eq!(pop_partition(1.0), [1.0, 0.0, 0.0]);
+        assert_eq!(pop_partition(-1.0), [0.0, 0.0, 1.0]);
+        // Mirror symmetry and the a → 1 limit: the back cone of HG(a) holds
+        // (1 − a)²(1 + a)·(…) → 0 quadratically; front → 1 continuously.
+        let [f1, _, b1] = pop_partition(0.7);
+        let [f2, _, b2] = pop_partition(-0.7);
+        assert!((f1 - b2).abs() < 1e-15 && (b1 - f2).abs() < 1e-15);
+        assert!(pop_partition(0.999_999)[0] > 0.999_99);
+        assert!(pop_partition(f64::NAN)[0].is_nan());
+    }
+
     use super::*;
 
     /// The sampler form given in the design brief (valid for `g ≥ 0`):

@@ -1,0 +1,208 @@
+//! Voxel media and directional lights for Principal-Ordinates Propagation (elek2014 Sec. 3–4).
+//!
+//! **Input → output.** A world-space box, a density per voxel (piecewise constant, x fastest) and
+//! per-channel coefficients at density 1 → point and cell queries of `σ_s`, `σ_a` and `g`. This is
+//! the "medium volume (which exists independently of the propagation volumes)" of elek2014 Sec. 4:
+//! the propagation grids sample it, and the Monte-Carlo reference (`crate::reference::grid_mc`)
+//! reads the same voxels exactly. Scene media (homogeneous, exponential height fog) are voxelised
+//! into one by [`VoxelMedium::from_fn`]; raw `f32` volumes are read by [`read_raw_density`].
+
+use std::path::Path;
+
+use glam::DVec3;
+
+/// A box of voxels with one density each; outside the box the density is 0.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VoxelMedium {
+    /// Lower corner \[m\].
+    pub min: DVec3,
+    /// Upper corner \[m\].
+    pub max: DVec3,
+    /// Voxels along x, y, z (each ≥ 1).
+    pub dims: [usize; 3],
+    /// Density per voxel, index `x + dims[0]·(y + dims[1]·z)`; multiplies `sigma_s` and `sigma_a`.
+    pub density: Vec<f32>,
+    /// Scattering coefficient per channel at density 1 \[1/m\].
+    pub sigma_s: [f64; 3],
+    /// Absorption coefficient per channel at density 1 \[1/m\].
+    pub sigma_a: [f64; 3],
+    /// HG mean cosine per channel, in `[0, 1)` (elek2014 does not propagate back-scattering media).
+    pub g: [f64; 3],
+}
+
+/// A distant light: parallel radiance along one direction (elek2014 Sec. 4).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectionalLight {
+    /// Unit direction the light travels to.
+    pub direction: DVec3,
+    /// Irradiance on a surface facing the light \[W/m²\] per channel.
+    pub irradiance: [f64; 3],
+}
+
+impl VoxelMedium {
+    /// Checks and builds a medium.
+    ///
+    /// # Errors
+    /// A message naming the problem and the fix: an empty or inverted box, a zero dimension, a
+    /// density count that does not match `dims`, a negative or non-finite density or coefficient,
+    /// or `g ∉ [0, 1)`.
+    pub fn new(
+        min: DVec3,
+        max: DVec3,
+        dims: [usize; 3],
+        density: Vec<f32>,
+        coefficients: ([f64; 3], [f64; 3], [f64; 3]),
+    ) -> Result<Self, String> {
+        let (sigma_s, sigma_a, g) = coefficients;
+        if !(min.is_finite() && max.is_finite()) || (max - min).min_element() <= 0.0 {
+            return Err(format!("the medium box {min} – {max} is empty or not finite; give max > min on every axis"));
+        }
+        if dims.contains(&0) {
+            return Err(format!("voxel dimensions {dims:?} contain 0; every axis needs at least one voxel"));
+        }
+        let n = dims[0].checked_mul(dims[1]).and_then(|v| v.checked_mul(dims[2]));
+        if n != Some(density.len()) {
+            return Err(format!(
+                "{} densities for {dims:?} voxels; the volume needs {} (x fastest, then y, then z)",
+                density.len(),
+                dims.iter().product::<usize>()
+            ));
+        }
+        if let Some((i, d)) = density.iter().enumerate().find(|(_, d)| !(d.is_finite() && **d >= 0.0)) {
+            return Err(format!("voxel {i} has density {d}; densities must be finite and ≥ 0"));
+        }
+        for c in 0..3 {
+            if !(sigma_s[c].is_finite() && sigma_s[c] >= 0.0 && sigma_a[c].is_finite() && sigma_a[c] >= 0.0) {
+                return Err(format!(
+                    "channel {c}: σ_s = {}, σ_a = {}; coefficients must be finite and ≥ 0 (1/m)",
+                    sigma_s[c], sigma_a[c]
+                ));
+            }
+            if !(g[c].is_finite() && (0.0..1.0).contains(&g[c])) {
+                return Err(format!("channel {c}: g = {}; POP propagates forward-scattering media, g in [0, 1)", g[c]));
+            }
+        }
+        Ok(Self { min, max, dims, density, sigma_s, sigma_a, g })
+    }
+
+    /// A homogeneous box (one voxel of density 1).
+    ///
+    /// # Errors
+    /// As [`VoxelMedium::new`].
+    pub fn homogeneous(min: DVec3, max: DVec3, coefficients: ([f64; 3], [f64; 3], [f64; 3])) -> Result<Self, String> {
+        Self::new(min, max, [1, 1, 1], vec![1.0], coefficients)
+    }
+
+    /// Voxelises a density function sampled at voxel centres.
+    ///
+    /// # Errors
+    /// As [`VoxelMedium::new`] (a negative or non-finite sample is reported with its voxel).
+    pub fn from_fn(
+        min: DVec3,
+        max: DVec3,
+        dims: [usize; 3],
+        coefficients: ([f64; 3], [f64; 3], [f64; 3]),
+        density: impl Fn(DVec3) -> f64,
+    ) -> Result<Self, String> {
+        let size = (max - min) / DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let mut values = Vec::with_capacity(dims.iter().product());
+        for z in 0..dims[2] {
+            for y in 0..dims[1] {
+                for x in 0..dims[0] {
+                    let p = min + size * DVec3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5);
+                    values.push(density(p) as f32);
+                }
+            }
+        }
+        Self::new(min, max, dims, values, coefficients)
+    }
+
+    /// Size of one voxel \[m\].
+    pub fn voxel_size(&self) -> DVec3 {
+        (self.max - self.min) / DVec3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64)
+    }
+
+    /// The voxel containing `p`, `None` outside the box (the upper faces belong to the last voxel).
+    pub fn voxel_of(&self, p: DVec3) -> Option<[usize; 3]> {
+        if !(p.cmpge(self.min).all() && p.cmple(self.max).all()) {
+            return None;
+        }
+        let t = (p - self.min) / self.voxel_size();
+        let f = |v: f64, n: usize| (v.max(0.0) as usize).min(n - 1);
+        Some([f(t.x, self.dims[0]), f(t.y, self.dims[1]), f(t.z, self.dims[2])])
+    }
+
+    /// Density of voxel `v`.
+    pub fn voxel_density(&self, v: [usize; 3]) -> f64 {
+        f64::from(self.density[v[0] + self.dims[0] * (v[1] + self.dims[1] * v[2])])
+    }
+
+    /// Density at `p` (piecewise constant per voxel, 0 outside the box).
+    pub fn density_at(&self, p: DVec3) -> f64 {
+        self.voxel_of(p).map_or(0.0, |v| self.voxel_density(v))
+    }
+
+    /// The largest voxel density (a majorant for delta tracking).
+    pub fn max_density(&self) -> f64 {
+        self.density.iter().fold(0.0_f64, |m, &d| m.max(f64::from(d)))
+    }
+}
+
+/// Reads a raw little-endian `f32` density volume of `dims` voxels (x fastest).
+///
+/// # Errors
+/// A message naming the file: missing or unreadable, or a size that is not `4 · x · y · z` bytes.
+pub fn read_raw_density(path: &Path, dims: [usize; 3]) -> Result<Vec<f32>, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("{}: cannot read the density volume: {e}", path.display()))?;
+    let n: usize = dims.iter().product();
+    if bytes.len() != n * 4 {
+        return Err(format!(
+            "{}: {} bytes, but {dims:?} voxels of little-endian f32 need {}; check `dims` or the file",
+            path.display(),
+            bytes.len(),
+            n * 4
+        ));
+    }
+    Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn coeffs() -> ([f64; 3], [f64; 3], [f64; 3]) {
+        ([4.0; 3], [0.0; 3], [0.7; 3])
+    }
+
+    #[test]
+    fn voxel_lookup_and_errors() {
+        let m = VoxelMedium::new(DVec3::ZERO, DVec3::new(2.0, 1.0, 1.0), [2, 1, 1], vec![1.0, 3.0], coeffs()).unwrap();
+        assert_eq!(m.density_at(DVec3::new(0.5, 0.5, 0.5)), 1.0);
+        assert_eq!(m.density_at(DVec3::new(1.5, 0.5, 0.5)), 3.0);
+        assert_eq!(m.density_at(DVec3::new(2.0, 1.0, 1.0)), 3.0);
+        assert_eq!(m.density_at(DVec3::new(2.1, 0.5, 0.5)), 0.0);
+        assert_eq!(m.max_density(), 3.0);
+        assert!(
+            VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [2, 1, 1], vec![1.0], coeffs()).unwrap_err().contains("needs 2")
+        );
+        assert!(VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [1, 1, 1], vec![-1.0], coeffs()).is_err());
+        assert!(VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [1, 1, 1], vec![f32::NAN], coeffs()).is_err());
+        assert!(VoxelMedium::homogeneous(DVec3::ONE, DVec3::ZERO, coeffs()).is_err());
+        assert!(VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, ([1.0; 3], [0.0; 3], [-0.1; 3])).is_err());
+        assert!(VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [0, 1, 1], vec![], coeffs()).is_err());
+    }
+
+    #[test]
+    fn raw_volume_round_trip_and_size_check() {
+        let dir = std::env::temp_dir().join(format!("voltab-raw-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("d.raw");
+        let vals = [0.0_f32, 1.5, 2.0, 4.25];
+        std::fs::write(&p, vals.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>()).unwrap();
+        assert_eq!(read_raw_density(&p, [2, 2, 1]).unwrap(), vals.to_vec());
+        let e = read_raw_density(&p, [2, 2, 2]).unwrap_err();
+        assert!(e.contains("d.raw") && e.contains("32"), "{e}");
+        assert!(read_raw_density(&dir.join("missing.raw"), [1, 1, 1]).unwrap_err().contains("missing.raw"));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
