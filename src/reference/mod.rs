@@ -4,6 +4,7 @@
 //! table generator.
 
 pub mod beam_adjoint;
+pub mod grid_mc;
 pub mod hg_hp;
 /// Brute-force volumetric path tracer: surface irradiance with volume-to-surface transport.
 pub mod volpath;
