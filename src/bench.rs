@@ -72,6 +72,9 @@ fn with_level(def: &TableDef, level: i32) -> TableDef {
             TableDef::ZhResponse(crate::tables::zh_response::ZhResponse { zstd_level: level, ..p.clone() })
         }
         TableDef::MsLobes(p) => TableDef::MsLobes(crate::tables::ms_lobes::MsLobes { zstd_level: level, ..p.clone() }),
+        TableDef::PopPreset(p) => {
+            TableDef::PopPreset(crate::tables::pop_preset::PopPreset { zstd_level: level, ..p.clone() })
+        }
     }
 }
 

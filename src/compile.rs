@@ -163,6 +163,7 @@ fn zstd_level(def: &TableDef) -> i32 {
         TableDef::PhaseHg(p) => p.zstd_level,
         TableDef::ZhResponse(p) => p.zstd_level,
         TableDef::MsLobes(p) => p.zstd_level,
+        TableDef::PopPreset(p) => p.zstd_level,
     }
 }
 

@@ -10,6 +10,7 @@ use super::parse::PipelineFile;
 use crate::stages::plot_phase::{PlotPhase, PlotPhaseRaw};
 use crate::tables::ms_lobes::{MsLobes, MsLobesRaw};
 use crate::tables::phase_hg::{PhaseHg, PhaseHgRaw};
+use crate::tables::pop_preset::{PopPreset, PopPresetRaw};
 use crate::tables::zh_response::{ZhResponse, ZhResponseRaw};
 
 /// (kind, what it is, fields, defaults) of one kind.
@@ -35,6 +36,12 @@ fn table_kinds() -> Vec<KindDoc> {
             "Multiple-scattering lobe tables (wang2018 Sec. 3.5.4, 4.1, 5.2): per HG g slice and albedo node, the radiance scattered at (rho, z) around a pencil beam toward a lobe direction by photons that had scattered at least once before (all orders >= 2, array total_g<i>[albedo, z, rho, theta(, phi)]), its direction integral (density_g<i>), the exactly-two-events part without its albedo^2 (double[g, ...]) and the fraction of each order's collisions inside the grid (inside[g, k]); one chunk per (g, albedo). Convention: unit-power beam from the origin along +z, sigma_t = 1, lengths in mean free paths, values in 1/(mfp sr) per unit beam power; theta is the angle between the outgoing direction and the axis origin -> P, and the symmetric lobe is the average over the azimuth about that axis (Full adds phi in [0, pi] from the plane of the beam). A medium with extinction sigma_t scales positions by sigma_t and values by sigma_t^3. Defaults: the Table 2 materials' g and channel albedos exactly, a 9-node albedo grid uniform in sqrt(1 - albedo), a 32 x [-16, 48] mfp grid (graded: 96 x 160 cells, finest at the beam start), 33 theta nodes (5.6 degrees, finer than the paper's 18), 2^19 photons per g traced to order 512 (orders beyond: central-limit closure), 10 mantissa bits (below the Monte-Carlo noise).",
             MsLobesRaw::FIELDS,
             MsLobes::defaults_json(),
+        ),
+        (
+            PopPresetRaw::KIND,
+            "Principal-Ordinates Propagation preset (elek2014 Sec. 4-5): N principal ordinates (spherical Fibonacci unit vectors, array ordinates[n, xyz]), the solid angle of each ordinate's Voronoi cell (ordinate_solid_angle[n], sr, sum 4 pi), the prefiltered initial anisotropy of Sec. 5.1 = mean cosine between the ordinate and its cell (ordinate_mean_cosine[n]), and the flow partition of Eqs. 2-3 (flow[a, side]: fractions of an HG lobe of mean cosine a, uniform in [-1, 1], reaching the front cell, EACH of the four side cells and the back cell). The scalar settings (grids, iterations, thresholds eps_l and eps_a of Eqs. 9-10, beta, importance propagation) are stored in the table's definition for the real-time solver. Defaults: the paper's real-time setting (64 ordinates, 20^3 grid, 15 iterations).",
+            PopPresetRaw::FIELDS,
+            PopPreset::defaults_json(),
         ),
     ]
 }

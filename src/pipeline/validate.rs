@@ -441,6 +441,7 @@ fn set_preset(d: &mut TableDecl, p: Option<String>) {
         TableDecl::PhaseHg(r) => r.preset = p,
         TableDecl::ZhResponse(r) => r.preset = p,
         TableDecl::MsLobes(r) => r.preset = p,
+        TableDecl::PopPreset(r) => r.preset = p,
     }
 }
 

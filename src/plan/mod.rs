@@ -529,6 +529,19 @@ fn plan_ms_lobes(t: &ValidatedTable, d: &MsLobes, needs: &Needs) -> TablePlan {
 
 /// A screen-space effect stage renders its own scene: it runs when that scene is among the planned
 /// scenes and has what the effect needs (`lacks` names what is missing).
+/// What a scene lacks for POP (`PopRender` and its `PopPreset` table): a global medium that scatters
+/// forward (`g ≥ 0`), or a directional light.
+fn pop_lacks(sc: &Scene) -> Option<&'static str> {
+    let media = sc.media.iter().filter(|m| m.boundary == crate::scene::Boundary::Global).collect::<Vec<_>>();
+    if media.len() != 1 || media[0].g.iter().any(|g| *g < 0.0) {
+        Some("single forward-scattering global medium")
+    } else if !sc.lights.iter().any(|l| matches!(l.kind, crate::scene::LightKind::Directional { .. })) {
+        Some("directional light")
+    } else {
+        None
+    }
+}
+
 /// What a scene lacks for a `TranslucentRender` stage: a refractive object bounding a medium, or a
 /// point or sphere light.
 fn translucent_lacks(sc: &Scene, t: &crate::stages::translucent::TranslucentRender) -> Option<&'static str> {
@@ -609,6 +622,23 @@ impl Plan {
                 TableDef::PhaseHg(d) => plan_phase_hg(t, d, &needs),
                 TableDef::ZhResponse(d) => plan_zh(t, d, &needs),
                 TableDef::MsLobes(d) => plan_ms_lobes(t, d, &needs),
+                // A POP preset has no scene slices: it is small and kept whole when a scene has what POP
+                // propagates.
+                TableDef::PopPreset(_) => match scenes.iter().find(|sc| pop_lacks(sc).is_none()) {
+                    Some(sc) => compiled(
+                        t,
+                        format!(
+                            "POP preset (kept whole): {} has a global medium and a directional light",
+                            sc.source.display()
+                        ),
+                        Vec::new(),
+                        t.def().clone(),
+                    ),
+                    None => skipped(
+                        t,
+                        "no scene has a global medium lit by a directional light (what POP propagates)".into(),
+                    ),
+                },
             })
             .collect();
         let tables = covered_elsewhere(p, tables);
@@ -649,6 +679,15 @@ impl Plan {
                 }
                 StageDef::TranslucentRender(t) => {
                     effect_stage(s, "translucent media", &t.scene, p, scenes, |sc| translucent_lacks(sc, t))
+                }
+                StageDef::PopRender(r) if !tables.iter().any(|tp| tp.id == r.table && tp.def.is_some()) => StagePlan {
+                    id: s.id().to_string(),
+                    decision: Decision::Skip,
+                    reason: format!("its table {} is skipped", r.table),
+                    def: None,
+                },
+                StageDef::PopRender(r) => {
+                    effect_stage(s, "principal-ordinates propagation", &r.scene, p, scenes, pop_lacks)
                 }
                 StageDef::ImageFog(f) => effect_stage(s, "image-space fog", &f.scene, p, scenes, |sc| {
                     crate::effects::image_fog::FogMedium::from_scene(sc).is_none().then_some("global medium")

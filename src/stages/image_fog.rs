@@ -14,7 +14,7 @@
 //! reference (spatially varying Gaussian) on a stratified grid of that many pixels, and the gather's
 //! full-frame time extrapolated per pixel. With `reference_samples > 0`, the physics: at
 //! `reference_width` pixels wide, a vacuum image and a fogged image are both path traced
-//! ([`volpath::radiance`]: multiple scattering, surfaces with the same `reference_depth`), the effect is
+//! ([`volpath::radiance`](crate::reference::volpath::radiance): multiple scattering, surfaces with the same `reference_depth`), the effect is
 //! applied to the vacuum image, and the relative RMSE of the attenuation-only fog and of the full effect
 //! against the path-traced fog is reported — how much closer multiple scattering gets.
 
@@ -26,10 +26,9 @@ use serde::{Deserialize, Serialize};
 use super::view::{self, View, ViewFields, ms};
 use super::{StageContext, StageError, StageOutcome};
 use crate::bench::BenchRow;
+use crate::effects::Image;
 use crate::effects::gbuffer::GBuffer;
 use crate::effects::image_fog::{self, FogMedium, FogOptions, LevelRule};
-use crate::effects::{Image, RgbImage, ViewCamera};
-use crate::reference::volpath::{self, CameraRay, VolPathOptions};
 use crate::report::plot::{Plot, Scale, Series, write_png};
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
@@ -451,8 +450,9 @@ impl ImageFogStage {
         let path = Path::new(&self.scene);
         let cam = self.fields().camera(id, scene, path, Some((w, h)))?;
         let t0 = Instant::now();
-        let vacuum = self.trace(scene, bvh, &cam, false).0;
-        let (fog, rel_stderr, noise) = self.trace(scene, bvh, &cam, true);
+        let trace = |media| view::path_trace(scene, bvh, &cam, self.reference_samples, self.reference_depth, media);
+        let vacuum = trace(false).0;
+        let (fog, rel_stderr, noise) = trace(true);
         let pt_ms = ms(t0);
         let distance = crate::effects::gbuffer::distance_image(bvh, &cam);
         let out = image_fog::render(&cam, &vacuum, &distance, medium, &self.options());
@@ -471,40 +471,6 @@ impl ImageFogStage {
             attenuation_only_corrected: corrected(att),
             effect_corrected: corrected(eff),
         })
-    }
-
-    /// Path-traced image of `cam` with or without media, its mean relative standard error (luminance),
-    /// and its noise as a relative RMSE (`sqrt(Σ stderr²) / sqrt(Σ L²)` over pixels and channels).
-    fn trace(&self, scene: &Scene, bvh: &SceneBvh, cam: &ViewCamera, media: bool) -> (RgbImage, f64, f64) {
-        let rays: Vec<CameraRay> = (0..cam.height)
-            .flat_map(|y| (0..cam.width).map(move |x| (x, y)))
-            .map(|(x, y)| CameraRay { origin: cam.position.to_array(), direction: cam.pixel_dir(x, y).to_array() })
-            .collect();
-        let opts = VolPathOptions {
-            samples: self.reference_samples,
-            max_depth: self.reference_depth,
-            rr_depth: 4,
-            // Independent streams for the two images, so the noise correction's independence holds.
-            seed: if media { 0x5eed } else { 0x5eed ^ 1 },
-            surface_bounces: true,
-            media,
-        };
-        let (est, _) = volpath::radiance(scene, bvh, &rays, &opts);
-        let lum = |c: [f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
-        let (mut se, mut m, mut var, mut sq) = (0.0, 0.0, 0.0, 0.0);
-        for e in &est {
-            se += lum(e.stderr);
-            m += lum(e.mean);
-            var += e.stderr.iter().map(|x| x * x).sum::<f64>();
-            sq += e.mean.iter().map(|x| x * x).sum::<f64>();
-        }
-        let img = Image {
-            width: cam.width,
-            height: cam.height,
-            data: est.iter().map(|e| e.mean.map(|c| if c.is_finite() { c as f32 } else { 0.0 })).collect(),
-        };
-        let noise = if sq > 0.0 { (var / sq).sqrt() } else { 0.0 };
-        (img, if m > 0.0 { se / m } else { 0.0 }, noise)
     }
 }
 

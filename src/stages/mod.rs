@@ -9,6 +9,7 @@ pub mod bake;
 pub mod god_rays;
 pub mod image_fog;
 pub mod plot_phase;
+pub mod pop;
 pub mod translucent;
 pub mod view;
 
@@ -32,6 +33,8 @@ pub enum StageDecl {
     ImageFog(image_fog::ImageFogRaw),
     /// Renders a scene's translucent object with point-based light samples and an `MsLobes` table (wang2018).
     TranslucentRender(translucent::TranslucentRenderRaw),
+    /// Renders a scene's global medium lit by directional lights with Principal-Ordinates Propagation (elek2014).
+    PopRender(pop::PopRenderRaw),
 }
 
 /// A resolved stage definition.
@@ -48,6 +51,8 @@ pub enum StageDef {
     ImageFog(image_fog::ImageFogStage),
     /// See [`translucent`].
     TranslucentRender(translucent::TranslucentRender),
+    /// See [`pop`].
+    PopRender(pop::PopRender),
 }
 
 /// Where a stage runs.
@@ -115,6 +120,7 @@ impl StageDecl {
             StageDecl::EpipolarShadows(_) => god_rays::EpipolarShadowsRaw::KIND,
             StageDecl::ImageFog(_) => image_fog::ImageFogRaw::KIND,
             StageDecl::TranslucentRender(_) => translucent::TranslucentRenderRaw::KIND,
+            StageDecl::PopRender(_) => pop::PopRenderRaw::KIND,
         }
     }
     /// The entry's id.
@@ -125,6 +131,7 @@ impl StageDecl {
             StageDecl::EpipolarShadows(r) => r.id.as_deref(),
             StageDecl::ImageFog(r) => r.id.as_deref(),
             StageDecl::TranslucentRender(r) => r.id.as_deref(),
+            StageDecl::PopRender(r) => r.id.as_deref(),
         }
     }
     /// Fills defaults.
@@ -135,6 +142,7 @@ impl StageDecl {
             StageDecl::EpipolarShadows(r) => StageDef::EpipolarShadows(r.resolve()),
             StageDecl::ImageFog(r) => StageDef::ImageFog(r.resolve()),
             StageDecl::TranslucentRender(r) => StageDef::TranslucentRender(r.resolve()),
+            StageDecl::PopRender(r) => StageDef::PopRender(r.resolve()),
         }
     }
 }
@@ -148,6 +156,7 @@ impl StageDef {
             StageDef::EpipolarShadows(_) => god_rays::EpipolarShadowsRaw::KIND,
             StageDef::ImageFog(_) => image_fog::ImageFogRaw::KIND,
             StageDef::TranslucentRender(_) => translucent::TranslucentRenderRaw::KIND,
+            StageDef::PopRender(_) => pop::PopRenderRaw::KIND,
         }
     }
     /// (field, referenced table id, required table kind) for every table this stage reads.
@@ -162,6 +171,9 @@ impl StageDef {
             StageDef::TranslucentRender(t) => {
                 vec![("table", t.table.clone(), crate::tables::ms_lobes::MsLobesRaw::KIND)]
             }
+            StageDef::PopRender(p) => {
+                vec![("table", p.table.clone(), crate::tables::pop_preset::PopPresetRaw::KIND)]
+            }
             StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) => Vec::new(),
         }
     }
@@ -173,6 +185,7 @@ impl StageDef {
             StageDef::EpipolarShadows(e) => e.validate(),
             StageDef::ImageFog(f) => f.validate(),
             StageDef::TranslucentRender(t) => t.validate(),
+            StageDef::PopRender(p) => p.validate(),
         }
     }
     /// Scene files the stage reads, resolved against `base_dir` (the pipeline's folder).
@@ -183,6 +196,7 @@ impl StageDef {
             StageDef::EpipolarShadows(e) => vec![e.scene_path(base_dir)],
             StageDef::ImageFog(f) => vec![f.scene_path(base_dir)],
             StageDef::TranslucentRender(t) => vec![t.scene_path(base_dir)],
+            StageDef::PopRender(p) => vec![p.scene_path(base_dir)],
         }
     }
     /// Error against run time for stages that have a reference (`voltab report --stages`): Markdown text,
@@ -197,6 +211,7 @@ impl StageDef {
             StageDef::EpipolarShadows(e) => e.report(id, ctx, report_dir).map(Some),
             StageDef::ImageFog(f) => f.report(id, ctx, report_dir).map(Some),
             StageDef::TranslucentRender(t) => t.report(id, ctx, report_dir).map(Some),
+            StageDef::PopRender(p) => p.report(id, ctx, report_dir).map(Some),
         }
     }
     /// Runs the stage on tables compiled into `ctx.out_dir`.
@@ -207,6 +222,7 @@ impl StageDef {
             StageDef::EpipolarShadows(e) => e.run(id, ctx),
             StageDef::ImageFog(f) => f.run(id, ctx),
             StageDef::TranslucentRender(t) => t.run(id, ctx),
+            StageDef::PopRender(p) => p.run(id, ctx),
         }
     }
 }

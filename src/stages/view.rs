@@ -198,3 +198,48 @@ pub fn write_json<T: serde::Serialize>(id: &str, path: &Path, value: &T) -> Resu
 pub fn ms(t0: Instant) -> f64 {
     t0.elapsed().as_secs_f64() * 1e3
 }
+
+/// Path-traced image of `cam` ([`volpath::radiance`], surfaces bounce, `samples` paths per pixel, at
+/// most `depth` vertices) with or without media, its mean relative standard error (luminance), and its
+/// noise as a relative RMSE (`sqrt(Σ stderr²) / sqrt(Σ L²)` over pixels and channels). The two
+/// settings of `media` use independent random streams.
+///
+/// [`volpath::radiance`]: crate::reference::volpath::radiance
+pub fn path_trace(
+    scene: &Scene,
+    bvh: &SceneBvh,
+    cam: &ViewCamera,
+    samples: u32,
+    depth: u32,
+    media: bool,
+) -> (RgbImage, f64, f64) {
+    use crate::reference::volpath::{self, CameraRay, VolPathOptions};
+    let rays: Vec<CameraRay> = (0..cam.height)
+        .flat_map(|y| (0..cam.width).map(move |x| (x, y)))
+        .map(|(x, y)| CameraRay { origin: cam.position.to_array(), direction: cam.pixel_dir(x, y).to_array() })
+        .collect();
+    let opts = VolPathOptions {
+        samples,
+        max_depth: depth,
+        rr_depth: 4,
+        seed: if media { 0x5eed } else { 0x5eed ^ 1 },
+        surface_bounces: true,
+        media,
+    };
+    let (est, _) = volpath::radiance(scene, bvh, &rays, &opts);
+    let lum = |c: [f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+    let (mut se, mut m, mut var, mut sq) = (0.0, 0.0, 0.0, 0.0);
+    for e in &est {
+        se += lum(e.stderr);
+        m += lum(e.mean);
+        var += e.stderr.iter().map(|x| x * x).sum::<f64>();
+        sq += e.mean.iter().map(|x| x * x).sum::<f64>();
+    }
+    let img = crate::effects::Image {
+        width: cam.width,
+        height: cam.height,
+        data: est.iter().map(|e| e.mean.map(|c| if c.is_finite() { c as f32 } else { 0.0 })).collect(),
+    };
+    let noise = if sq > 0.0 { (var / sq).sqrt() } else { 0.0 };
+    (img, if m > 0.0 { se / m } else { 0.0 }, noise)
+}

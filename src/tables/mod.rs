@@ -11,6 +11,7 @@
 
 pub mod ms_lobes;
 pub mod phase_hg;
+pub mod pop_preset;
 pub mod zh_response;
 
 use serde::{Deserialize, Serialize};
@@ -27,6 +28,8 @@ pub enum TableDecl {
     ZhResponse(zh_response::ZhResponseRaw),
     /// Multiple-scattering lobe tables of wang2018 (per albedo, g, ρ, z and lobe angle).
     MsLobes(ms_lobes::MsLobesRaw),
+    /// Principal-Ordinates Propagation preset of elek2014 (ordinates, cell integrals, flow table, settings).
+    PopPreset(pop_preset::PopPresetRaw),
 }
 
 /// A resolved table definition: every parameter present. Its canonical RON is hashed into the
@@ -40,6 +43,8 @@ pub enum TableDef {
     ZhResponse(zh_response::ZhResponse),
     /// See [`ms_lobes`].
     MsLobes(ms_lobes::MsLobes),
+    /// See [`pop_preset`].
+    PopPreset(pop_preset::PopPreset),
 }
 
 /// A problem with one field's value, found by a kind's own validation.
@@ -126,12 +131,17 @@ impl TableDecl {
             TableDecl::PhaseHg(_) => phase_hg::PhaseHgRaw::KIND,
             TableDecl::ZhResponse(_) => zh_response::ZhResponseRaw::KIND,
             TableDecl::MsLobes(_) => ms_lobes::MsLobesRaw::KIND,
+            TableDecl::PopPreset(_) => pop_preset::PopPresetRaw::KIND,
         }
     }
 
     /// All kind names, for "did you mean".
-    pub const KINDS: &'static [&'static str] =
-        &[phase_hg::PhaseHgRaw::KIND, zh_response::ZhResponseRaw::KIND, ms_lobes::MsLobesRaw::KIND];
+    pub const KINDS: &'static [&'static str] = &[
+        phase_hg::PhaseHgRaw::KIND,
+        zh_response::ZhResponseRaw::KIND,
+        ms_lobes::MsLobesRaw::KIND,
+        pop_preset::PopPresetRaw::KIND,
+    ];
 
     /// Field names of this kind (without `id`/`preset`).
     pub fn field_names(&self) -> Vec<&'static str> {
@@ -139,6 +149,7 @@ impl TableDecl {
             TableDecl::PhaseHg(_) => phase_hg::PhaseHgRaw::FIELDS.iter().map(|f| f.name).collect(),
             TableDecl::ZhResponse(_) => zh_response::ZhResponseRaw::FIELDS.iter().map(|f| f.name).collect(),
             TableDecl::MsLobes(_) => ms_lobes::MsLobesRaw::FIELDS.iter().map(|f| f.name).collect(),
+            TableDecl::PopPreset(_) => pop_preset::PopPresetRaw::FIELDS.iter().map(|f| f.name).collect(),
         }
     }
 
@@ -148,6 +159,7 @@ impl TableDecl {
             TableDecl::PhaseHg(r) => r.id.as_deref(),
             TableDecl::ZhResponse(r) => r.id.as_deref(),
             TableDecl::MsLobes(r) => r.id.as_deref(),
+            TableDecl::PopPreset(r) => r.id.as_deref(),
         }
     }
 
@@ -157,6 +169,7 @@ impl TableDecl {
             TableDecl::PhaseHg(r) => r.preset.as_deref(),
             TableDecl::ZhResponse(r) => r.preset.as_deref(),
             TableDecl::MsLobes(r) => r.preset.as_deref(),
+            TableDecl::PopPreset(r) => r.preset.as_deref(),
         }
     }
 
@@ -166,6 +179,7 @@ impl TableDecl {
             TableDecl::PhaseHg(r) => r.set_fields(),
             TableDecl::ZhResponse(r) => r.set_fields(),
             TableDecl::MsLobes(r) => r.set_fields(),
+            TableDecl::PopPreset(r) => r.set_fields(),
         }
     }
 
@@ -175,6 +189,7 @@ impl TableDecl {
             (TableDecl::PhaseHg(a), TableDecl::PhaseHg(b)) => Some(TableDecl::PhaseHg(a.merged_over(b))),
             (TableDecl::ZhResponse(a), TableDecl::ZhResponse(b)) => Some(TableDecl::ZhResponse(a.merged_over(b))),
             (TableDecl::MsLobes(a), TableDecl::MsLobes(b)) => Some(TableDecl::MsLobes(a.merged_over(b))),
+            (TableDecl::PopPreset(a), TableDecl::PopPreset(b)) => Some(TableDecl::PopPreset(a.merged_over(b))),
             _ => None,
         }
     }
@@ -185,6 +200,7 @@ impl TableDecl {
             TableDecl::PhaseHg(r) => TableDef::PhaseHg(r.resolve()),
             TableDecl::ZhResponse(r) => TableDef::ZhResponse(r.resolve()),
             TableDecl::MsLobes(r) => TableDef::MsLobes(r.resolve()),
+            TableDecl::PopPreset(r) => TableDef::PopPreset(r.resolve()),
         }
     }
 }
@@ -196,6 +212,7 @@ impl TableDef {
             TableDef::PhaseHg(_) => phase_hg::PhaseHgRaw::KIND,
             TableDef::ZhResponse(_) => zh_response::ZhResponseRaw::KIND,
             TableDef::MsLobes(_) => ms_lobes::MsLobesRaw::KIND,
+            TableDef::PopPreset(_) => pop_preset::PopPresetRaw::KIND,
         }
     }
 
@@ -205,6 +222,7 @@ impl TableDef {
             TableDef::PhaseHg(_) => phase_hg::KIND_SCHEMA_VERSION,
             TableDef::ZhResponse(_) => zh_response::KIND_SCHEMA_VERSION,
             TableDef::MsLobes(_) => ms_lobes::KIND_SCHEMA_VERSION,
+            TableDef::PopPreset(_) => pop_preset::KIND_SCHEMA_VERSION,
         }
     }
 
@@ -214,6 +232,7 @@ impl TableDef {
             TableDef::PhaseHg(_) => phase_hg::GENERATOR_VERSION,
             TableDef::ZhResponse(_) => zh_response::GENERATOR_VERSION,
             TableDef::MsLobes(_) => ms_lobes::GENERATOR_VERSION,
+            TableDef::PopPreset(_) => pop_preset::GENERATOR_VERSION,
         }
     }
 
@@ -223,6 +242,7 @@ impl TableDef {
             TableDef::PhaseHg(p) => p.validate(),
             TableDef::ZhResponse(p) => p.validate(),
             TableDef::MsLobes(p) => p.validate(),
+            TableDef::PopPreset(p) => p.validate(),
         }
     }
 
@@ -232,6 +252,7 @@ impl TableDef {
             TableDef::PhaseHg(p) => p.estimated_bytes(),
             TableDef::ZhResponse(p) => p.estimated_bytes(),
             TableDef::MsLobes(p) => p.estimated_bytes(),
+            TableDef::PopPreset(p) => p.estimated_bytes(),
         }
     }
 
@@ -241,6 +262,7 @@ impl TableDef {
             TableDef::PhaseHg(p) => p.work_units(),
             TableDef::ZhResponse(p) => p.work_units(),
             TableDef::MsLobes(p) => p.work_units(),
+            TableDef::PopPreset(p) => p.work_units(),
         }
     }
 
@@ -257,6 +279,7 @@ impl TableDef {
             TableDef::PhaseHg(p) => p.generate(key, progress),
             TableDef::ZhResponse(p) => p.generate(key, progress),
             TableDef::MsLobes(p) => p.generate(key, progress),
+            TableDef::PopPreset(p) => p.generate(key, progress),
         }
     }
 }
@@ -268,6 +291,7 @@ impl TableDef {
             TableDef::PhaseHg(p) => p.estimate_errors(generated, key),
             TableDef::ZhResponse(p) => p.estimate_errors(generated, key),
             TableDef::MsLobes(p) => p.estimate_errors(generated, key),
+            TableDef::PopPreset(p) => p.estimate_errors(generated, key),
         }
     }
 
@@ -279,6 +303,7 @@ impl TableDef {
                 p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::ZhResponse(d))).collect()
             }
             TableDef::MsLobes(p) => p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::MsLobes(d))).collect(),
+            TableDef::PopPreset(p) => p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::PopPreset(d))).collect(),
         }
     }
 
@@ -292,6 +317,9 @@ impl TableDef {
             TableDef::MsLobes(_) => {
                 "max relative error of the lobes vs the beam quadrature (E_2) and the backward-walk reference (total)"
             }
+            TableDef::PopPreset(_) => {
+                "max absolute error of the interpolated flow fractions [front, side, back] vs the double-double HG cumulative"
+            }
         }
     }
 
@@ -301,6 +329,7 @@ impl TableDef {
             TableDef::PhaseHg(p) => p.report_measure(generated),
             TableDef::ZhResponse(p) => p.report_measure(generated),
             TableDef::MsLobes(p) => p.report_measure(generated),
+            TableDef::PopPreset(p) => p.report_measure(generated),
         }
     }
 }
@@ -354,6 +383,7 @@ pub fn check_known_kind(h: &crate::container::Header) -> Result<(), String> {
         k if k == phase_hg::PhaseHgRaw::KIND => phase_hg::KIND_SCHEMA_VERSION,
         k if k == zh_response::ZhResponseRaw::KIND => zh_response::KIND_SCHEMA_VERSION,
         k if k == ms_lobes::MsLobesRaw::KIND => ms_lobes::KIND_SCHEMA_VERSION,
+        k if k == pop_preset::PopPresetRaw::KIND => pop_preset::KIND_SCHEMA_VERSION,
         other => {
             return Err(format!(
                 "unknown table kind `{other}`: voltab {} reads {}; upgrade voltab to use this table",

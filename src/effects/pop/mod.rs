@@ -17,10 +17,12 @@
 //! of propagating `L_in T_i` from every cell; the phase convolution in the accumulation) is stated in
 //! [`propagate`] and in `docs/design/pop.md`.
 
+pub mod fig12;
 pub mod grid;
 pub mod medium;
 pub mod propagate;
 pub mod render;
+pub mod scene;
 
 #[cfg(test)]
 mod tests;

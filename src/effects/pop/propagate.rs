@@ -23,9 +23,10 @@
 //! once-scattered lobe about `d` is exactly HG(g)). The seed is counted at half weight in the sum
 //! (light scattered inside a cell crosses on average half of it there).
 //!
-//! **Isotropic residuum (Sec. 5.4).** After `m'` (Eq. 10) anisotropic iterations the remaining
-//! energy is propagated with `a = 0` (fixed partition, no anisotropy bookkeeping) until it falls
-//! below `ε_L` of the seeded energy.
+//! **Isotropic residuum (Sec. 5.4).** When `m'` (Eq. 10) is below the iteration budget `M`, after
+//! `m'` anisotropic iterations the remaining energy is propagated with `a = 0` (fixed partition, no
+//! anisotropy bookkeeping) until it falls below `ε_L` of the seeded energy. Otherwise `M` anisotropic
+//! iterations run and what is left is reported, not turned isotropic.
 
 use std::time::Instant;
 
@@ -84,7 +85,8 @@ impl FlowTable {
 pub struct Settings {
     /// Anisotropic iterations at most (`M`).
     pub iterations: usize,
-    /// Switch to the isotropic residuum after `switch_iteration` anisotropic iterations.
+    /// Switch to the isotropic residuum after `switch_iteration` anisotropic iterations, when that is
+    /// fewer than `iterations`.
     pub residuum: bool,
     /// `m'` of Eq. 10.
     pub switch_iteration: usize,
@@ -251,8 +253,10 @@ pub fn propagate(
     let prop_start = Instant::now();
     let mut l = seed;
     let mut a = a0;
-    let anisotropic_cap =
-        if settings.residuum { settings.iterations.min(settings.switch_iteration) } else { settings.iterations };
+    // The residuum takes over only where Eq. 10 says the anisotropy has decayed within the budget
+    // (m' < M); otherwise the lobes are still directional after M iterations and stay so.
+    let residuum = settings.residuum && settings.switch_iteration < settings.iterations;
+    let anisotropic_cap = if residuum { settings.switch_iteration } else { settings.iterations };
     let mut anisotropic_iterations = 0;
     while anisotropic_iterations < anisotropic_cap && *energy.last().unwrap_or(&0.0) > stop {
         let (nl, na) = step(grid, flow, &l, Some(&a));
@@ -266,7 +270,7 @@ pub fn propagate(
 
     let res_start = Instant::now();
     let mut isotropic_iterations = 0;
-    if settings.residuum {
+    if residuum {
         let zero = vec![[0.0; 3]; grid.len()];
         while isotropic_iterations < settings.residuum_iterations && *energy.last().unwrap_or(&0.0) > stop {
             l = step(grid, flow, &l, None).0;

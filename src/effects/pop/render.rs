@@ -44,8 +44,16 @@ pub struct Frame {
     pub transmittance: Vec<Rgb>,
 }
 
-/// The upsampled value of `toward_eye` at `p` (joint bilateral, see the module doc).
-pub fn upsample(grid: &Grid, toward_eye: &[Rgb], medium: &VoxelMedium, p: DVec3, range: f64) -> Rgb {
+/// `1/(σ_r ρ_max)`, the bilateral range scale of [`upsample`] (0: trilinear) for a range width `range`
+/// relative to the medium's largest density (`INFINITY` or ≤ 0: trilinear).
+pub fn range_scale(medium: &VoxelMedium, range: f64) -> f64 {
+    let m = medium.max_density();
+    if range.is_finite() && range > 0.0 && m > 0.0 { 1.0 / (range * m) } else { 0.0 }
+}
+
+/// The upsampled value of `toward_eye` at `p` (joint bilateral, see the module doc; `inv_range` from
+/// [`range_scale`]).
+pub fn upsample(grid: &Grid, toward_eye: &[Rgb], medium: &VoxelMedium, p: DVec3, inv_range: f64) -> Rgb {
     let t = grid.local(p) - DVec3::splat(0.5);
     let dims = grid.dims;
     let clampf = |v: f64, n: usize| v.clamp(0.0, (n - 1) as f64);
@@ -53,12 +61,6 @@ pub fn upsample(grid: &Grid, toward_eye: &[Rgb], medium: &VoxelMedium, p: DVec3,
     let base = [t.x as usize, t.y as usize, t.z as usize];
     let f = t - DVec3::new(base[0] as f64, base[1] as f64, base[2] as f64);
     let rho = medium.density_at(p);
-    let inv_range = if range.is_finite() && range > 0.0 {
-        let m = medium.max_density();
-        if m > 0.0 { 1.0 / (range * m) } else { 0.0 }
-    } else {
-        0.0
-    };
     let mut sum = [0.0; 3];
     let mut wsum = 0.0;
     let mut plain = [0.0; 3];
@@ -108,6 +110,7 @@ pub fn march(
     let step = opts.step_fraction.max(1e-3)
         * medium.voxel_size().min_element().min(grid.size.iter().copied().fold(f64::INFINITY, f64::min));
     let (w, h) = (camera.width, camera.height);
+    let inv_range = range_scale(medium, opts.range_sigma);
     let pixels: Vec<(Rgb, Rgb)> = (0..w * h)
         .into_par_iter()
         .map(|n| {
@@ -131,7 +134,7 @@ pub fn march(
                 if rho <= 0.0 {
                     continue;
                 }
-                let j = upsample(grid, toward_eye, medium, p, opts.range_sigma);
+                let j = upsample(grid, toward_eye, medium, p, inv_range);
                 for c in 0..3 {
                     let ss = rho * medium.sigma_s[c];
                     let st = ss + rho * medium.sigma_a[c];

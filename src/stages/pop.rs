@@ -1,0 +1,607 @@
+//! `PopRender`: scene + `PopPreset` table → elek2014 Principal-Ordinates Propagation of the scene's
+//! global medium lit by its directional lights, ray-marched into an EXR + PNG, with an optional
+//! comparison against brute-force volumetric path tracing.
+//!
+//! **Input.** A scene file (relative to the pipeline file) with a perspective camera, one global
+//! medium (homogeneous or exponential height fog; optionally multiplied by a raw `f32` density volume
+//! spanning the scene's bounds) and directional lights; the id of a compiled `PopPreset` table (grid,
+//! iterations, ε_L, ε_a, residuum switch, flow table). **Phases** (elek2014 Fig. 14 names, in
+//! `summary.json`): import → BVH → G-buffer → voxelisation → per directional light: grid and medium
+//! downsampling, initialisation (Sec. 4.1), propagation (Eqs. 2–8), isotropic residuum (Sec. 5.4) →
+//! ray marching with joint-bilateral upsampling (Sec. 4.4) → `<out>/<stage>/pop.exr` (layers
+//! `scattered`, `transmittance`, `colour`) with PNG previews and `summary.json`.
+//!
+//! **Check** (with `fig12_photons > 0`): elek2014 Fig. 12 with this stage's preset — the unit cube
+//! (`σ_s = 4`, albedo 1, a directional light, `g` = 0, 0.7, 0.96) propagated by POP and light traced by
+//! [`crate::reference::grid_mc`]: collided fluence and radiance distributions in the middle slice, and
+//! images of the cube against the camera path tracer (`fig12_g*.png`, `summary.json`). The scene itself
+//! is not path traced: voltab's path tracer fills space with the global medium without bound (so the
+//! sun reaches nothing inside a closed room), while POP, like the paper, confines the medium to the
+//! scene's bounds.
+
+use std::path::Path;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use super::view::{self, ms};
+use super::{StageContext, StageError, StageOutcome};
+use crate::effects::pop::grid::Grid;
+use crate::effects::pop::propagate::{self, FlowTable, Observer, PhaseTimes, Settings};
+use crate::effects::pop::render::{self, MarchOptions};
+use crate::effects::pop::scene::{self as pop_scene, BvhOccluder, RawDensity, SceneMedia};
+use crate::effects::{Image, RgbImage, ViewCamera};
+use crate::scene::Scene;
+use crate::scene::bvh::SceneBvh;
+use crate::tables::FieldIssue;
+use crate::tables::pop_preset::PopPresetTable;
+
+crate::declare_params! {
+    /// Render a scene's global medium lit by its directional lights with elek2014's Principal-Ordinates
+    /// Propagation, using a `PopPreset` table.
+    raw PopRenderRaw => resolved PopRender, kind "PopRender" {
+        /// Scene file (.gltf, .glb, .usda, .usdc, .usd, .usdz), relative to the pipeline file.
+        scene: String = String::new(), unit = "", range = "path to a scene file";
+        /// Id of the `PopPreset` table (grid, iterations, thresholds, flow table).
+        table: String = String::new(), unit = "", range = "id of a PopPreset table in this pipeline";
+        /// Index of the scene camera to render.
+        camera: u32 = 0, unit = "", range = "0 to the scene's camera count - 1";
+        /// Image width.
+        width: u32 = 640, unit = "px", range = "1 to 8192";
+        /// Image height.
+        height: u32 = 480, unit = "px", range = "1 to 8192";
+        /// Paths per pixel of the vacuum colour buffer (direct light at the first hit).
+        colour_samples: u32 = 8, unit = "paths", range = "1 to 65536";
+        /// Voxels of the scene medium along the scene's longest axis (the medium volume POP samples).
+        voxels: u32 = 64, unit = "voxels", range = "1 to 1024";
+        /// Raw little-endian f32 density volume (x fastest) spanning the scene's bounds, relative to the
+        /// pipeline file, multiplying the medium's density; empty: none.
+        density_raw: String = String::new(), unit = "", range = "empty or path to a .raw file";
+        /// Voxels of `density_raw` along x, y, z.
+        density_dims: [u32; 3] = [0, 0, 0], unit = "voxels", range = "each 1 to 1024 when density_raw is given";
+        /// Range width of the joint-bilateral upsampling relative to the largest density (0: trilinear).
+        range_sigma: f64 = 0.25, unit = "", range = "0 to 100";
+        /// Photons of the elek2014 Fig. 12 comparison on the unit cube (σ_s = 4, albedo 1, g = 0, 0.7,
+        /// 0.96) against Monte-Carlo light tracing, with this stage's preset (0: none).
+        fig12_photons: u32 = 0, unit = "photons", range = "0 to 100000000";
+        /// Width and height of the Fig. 12 cube images (POP against path tracing).
+        fig12_size: u32 = 64, unit = "px", range = "4 to 1024";
+        /// Paths per pixel of the path-traced cube images.
+        fig12_samples: u32 = 64, unit = "paths", range = "1 to 100000";
+        /// Output folder name in the output directory; empty means the stage id.
+        output: String = String::new(), unit = "", range = "plain folder name";
+    }
+}
+
+super::view::impl_view_fields!(PopRender);
+
+/// One directional light's propagation.
+#[derive(Debug, Clone, Serialize)]
+pub struct LightRun {
+    /// Light name.
+    pub light: String,
+    /// Grid cells (lateral, lateral, along the light).
+    pub grid: [usize; 3],
+    /// Cell size \[m\].
+    pub cell: [f64; 3],
+    /// Eq. 10's switch iteration `m'`.
+    pub switch_iteration: usize,
+    /// Anisotropic iterations run.
+    pub anisotropic_iterations: usize,
+    /// Isotropic residuum iterations run.
+    pub isotropic_iterations: usize,
+    /// Energy left after the last iteration, relative to the seeded energy.
+    pub residual_energy: f64,
+    /// Grid build and medium downsampling \[ms\].
+    pub grid_ms: f64,
+    /// Phase times \[ms\].
+    pub phases_ms: PhaseMs,
+}
+
+/// [`PhaseTimes`] in milliseconds.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct PhaseMs {
+    /// Initialisation sweep.
+    pub initialisation: f64,
+    /// Anisotropic propagation (accumulation included).
+    pub propagation: f64,
+    /// Isotropic residuum (accumulation included).
+    pub residuum: f64,
+    /// Accumulation alone.
+    pub accumulation: f64,
+}
+
+impl From<PhaseTimes> for PhaseMs {
+    fn from(t: PhaseTimes) -> Self {
+        Self {
+            initialisation: t.initialisation * 1e3,
+            propagation: t.propagation * 1e3,
+            residuum: t.residuum * 1e3,
+            accumulation: t.accumulation * 1e3,
+        }
+    }
+}
+
+/// One `g` of the Fig. 12 comparison.
+#[derive(Debug, Clone, Serialize)]
+pub struct Fig12Row {
+    /// Phase mean cosine.
+    pub g: f64,
+    /// Mid-slice errors, iterations and times.
+    pub slice: crate::effects::pop::fig12::SliceComparison,
+    /// Relative RMSE of POP's cube image against path tracing, noise removed.
+    pub image_error: f64,
+    /// The path-traced image's noise (relative RMSE).
+    pub image_noise: f64,
+    /// POP (propagation + ray march) and path-tracing times for the image \[ms\].
+    pub image_ms: [f64; 2],
+}
+
+/// What `summary.json` holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct PopSummary {
+    /// Scene file.
+    pub scene: String,
+    /// Image size.
+    pub size: [usize; 2],
+    /// The medium and its voxels.
+    pub medium: String,
+    /// Voxels of the medium volume.
+    pub voxels: [usize; 3],
+    /// Import, BVH, G-buffer, voxelisation \[ms\].
+    pub setup_ms: [f64; 4],
+    /// Per light.
+    pub lights: Vec<LightRun>,
+    /// Ray marching \[ms\].
+    pub ray_march_ms: f64,
+    /// Lights and media left out.
+    pub skipped: Vec<String>,
+    /// elek2014 Fig. 12 against Monte-Carlo light tracing.
+    pub fig12: Vec<Fig12Row>,
+}
+
+/// A rendered POP frame (no G-buffer colour).
+pub struct PopFrame {
+    /// Scattered light of all lights.
+    pub scattered: RgbImage,
+    /// Transmittance to the surface.
+    pub transmittance: RgbImage,
+    /// Per light.
+    pub lights: Vec<LightRun>,
+    /// Ray marching \[ms\].
+    pub march_ms: f64,
+}
+
+/// The POP settings of a preset table for a grid (Eq. 10's switch from the medium's mean `σ_s` and `g`).
+pub fn settings_for(table: &PopPresetTable, grid: &Grid) -> (Settings, FlowTable) {
+    let def = &table.def;
+    let occupied: Vec<f64> = grid
+        .cells
+        .iter()
+        .filter(|c| c.density > 0.0)
+        .map(|c| (c.sigma_s[0] + c.sigma_s[1] + c.sigma_s[2]) / 3.0)
+        .collect();
+    let sigma_s_mean = if occupied.is_empty() { 0.0 } else { occupied.iter().sum::<f64>() / occupied.len() as f64 };
+    let g = (grid.g[0] + grid.g[1] + grid.g[2]) / 3.0;
+    // The seeds start at a = g (propagate's module doc): the largest anisotropy Eq. 10 starts from.
+    let switch = def.switch_iteration(g, g, sigma_s_mean, grid.size[2], grid.dims[2]);
+    let flow =
+        FlowTable::from_rows(table.flow_rows().to_vec()).unwrap_or_else(|_| FlowTable::exact(def.a_bins as usize));
+    (
+        Settings {
+            iterations: def.iterations as usize,
+            residuum: def.residuum,
+            switch_iteration: switch,
+            residuum_iterations: def.residuum_iterations as usize,
+            eps_l: def.eps_l,
+        },
+        flow,
+    )
+}
+
+/// Propagates every directional light of `media` and ray-marches the camera view.
+pub fn render_frame(
+    media: &SceneMedia,
+    bvh: &SceneBvh,
+    table: &PopPresetTable,
+    cam: &ViewCamera,
+    distance: &[f64],
+    range_sigma: f64,
+) -> Result<PopFrame, String> {
+    let occluder = BvhOccluder(bvh);
+    let dims = table.def.grid.map(|v| v as usize);
+    let (w, h) = (cam.width, cam.height);
+    let mut scattered = vec![[0.0f64; 3]; w * h];
+    let mut transmittance = vec![[1.0f64; 3]; w * h];
+    let mut lights = Vec::new();
+    let mut march_ms = 0.0;
+    let opts =
+        MarchOptions { range_sigma: if range_sigma > 0.0 { range_sigma } else { f64::INFINITY }, ..Default::default() };
+    for (light, name) in media.lights.iter().zip(&media.light_names) {
+        let t0 = Instant::now();
+        let grid = Grid::new(&media.medium, light.direction, dims, &occluder)?;
+        let grid_ms = ms(t0);
+        let (settings, flow) = settings_for(table, &grid);
+        let p = propagate::propagate(&grid, light, &occluder, &flow, &settings, Observer::Eye(cam.position));
+        let t0 = Instant::now();
+        let f = render::march(&grid, &p.toward_eye, &media.medium, cam, Some(distance), &opts);
+        march_ms += ms(t0);
+        for (s, r) in scattered.iter_mut().zip(&f.radiance) {
+            for c in 0..3 {
+                s[c] += r[c];
+            }
+        }
+        transmittance = f.transmittance;
+        let seeded = p.energy.first().copied().unwrap_or(0.0);
+        lights.push(LightRun {
+            light: name.clone(),
+            grid: grid.dims,
+            cell: grid.size,
+            switch_iteration: settings.switch_iteration,
+            anisotropic_iterations: p.anisotropic_iterations,
+            isotropic_iterations: p.isotropic_iterations,
+            residual_energy: if seeded > 0.0 { p.energy.last().copied().unwrap_or(0.0) / seeded } else { 0.0 },
+            grid_ms,
+            phases_ms: p.times.into(),
+        });
+    }
+    let to_img =
+        |v: Vec<[f64; 3]>| Image { width: w, height: h, data: v.into_iter().map(|c| c.map(|x| x as f32)).collect() };
+    Ok(PopFrame { scattered: to_img(scattered), transmittance: to_img(transmittance), lights, march_ms })
+}
+
+/// `colour · transmittance (+ scattered)`.
+pub fn compose(colour: &RgbImage, frame: &PopFrame, with_scattered: bool) -> RgbImage {
+    let data = colour
+        .data
+        .iter()
+        .zip(&frame.transmittance.data)
+        .zip(&frame.scattered.data)
+        .map(|((c, t), s)| [0, 1, 2].map(|k| c[k] * t[k] + if with_scattered { s[k] } else { 0.0 }))
+        .collect();
+    Image { width: colour.width, height: colour.height, data }
+}
+
+impl PopRender {
+    /// Range checks.
+    pub fn validate(&self) -> Vec<FieldIssue> {
+        let mut v = self.fields().validate();
+        let mut issue = |field: &'static str, message: String, help: &str| {
+            v.push(FieldIssue { field, message, help: help.into() });
+        };
+        if self.table.is_empty() {
+            issue("table", "table is empty".into(), "give the id of a PopPreset table, e.g. table: \"pop_realtime\"");
+        }
+        if !(1..=1024).contains(&self.voxels) {
+            issue("voxels", format!("voxels = {}", self.voxels), "use 1 to 1024");
+        }
+        if !self.density_raw.is_empty() && self.density_dims.iter().any(|d| !(1..=1024).contains(d)) {
+            issue(
+                "density_dims",
+                format!("density_dims = {:?} with density_raw = \"{}\"", self.density_dims, self.density_raw),
+                "give the raw volume's voxels per axis, each 1 to 1024",
+            );
+        }
+        if !(self.range_sigma.is_finite() && (0.0..=100.0).contains(&self.range_sigma)) {
+            issue("range_sigma", format!("range_sigma = {}", self.range_sigma), "use 0 (trilinear) to 100");
+        }
+        if self.fig12_photons > 100_000_000 {
+            issue("fig12_photons", format!("fig12_photons = {}", self.fig12_photons), "use 0 (none) to 100000000");
+        }
+        if !(4..=1024).contains(&self.fig12_size) {
+            issue("fig12_size", format!("fig12_size = {}", self.fig12_size), "use 4 to 1024");
+        }
+        if !(1..=100_000).contains(&self.fig12_samples) {
+            issue("fig12_samples", format!("fig12_samples = {}", self.fig12_samples), "use 1 to 100000");
+        }
+        v
+    }
+
+    fn open_table(&self, id: &str, ctx: &StageContext) -> Result<PopPresetTable, StageError> {
+        let path = ctx.out_dir.join(format!("{}.vtab", self.table));
+        PopPresetTable::open(&path).map_err(|e| StageError::Table { stage: id.into(), path, message: e.to_string() })
+    }
+
+    /// The scene's media for POP (voxelised, with the raw density when given).
+    pub fn media(&self, id: &str, ctx: &StageContext, scene: &Scene) -> Result<SceneMedia, StageError> {
+        let fail = |message: String| StageError::Input {
+            stage: id.into(),
+            message,
+            help: "fix the scene's medium and lights, or the stage's density_raw / density_dims".into(),
+        };
+        let raw = if self.density_raw.is_empty() {
+            None
+        } else {
+            let dims = self.density_dims.map(|d| d as usize);
+            let values = crate::effects::pop::medium::read_raw_density(&ctx.base_dir.join(&self.density_raw), dims)
+                .map_err(fail)?;
+            Some(RawDensity { dims, values })
+        };
+        pop_scene::scene_media(scene, self.voxels as usize, raw.as_ref()).map_err(fail)
+    }
+
+    /// Runs the stage.
+    pub fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        let fields = self.fields();
+        let dir = fields.out_dir(id, ctx)?;
+        let table = self.open_table(id, ctx)?;
+        let v = fields.load(id, ctx, None)?;
+        let t0 = Instant::now();
+        let media = self.media(id, ctx, &v.scene)?;
+        let voxel_ms = ms(t0);
+        let g = &v.gbuffer;
+        let distance: Vec<f64> = g.distance.data.iter().map(|&d| f64::from(d)).collect();
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
+        let frame = render_frame(&media, &v.bvh, &table, &g.camera, &distance, self.range_sigma).map_err(fail)?;
+        let image = compose(&g.colour, &frame, true);
+        let mut outputs = view::write_image(
+            id,
+            &dir,
+            "pop",
+            &image,
+            &[("scattered", &frame.scattered), ("transmittance", &frame.transmittance), ("colour", &g.colour)],
+        )?;
+        let png = dir.join("pop_scattered.png");
+        crate::image_io::write_png_preview(
+            &png,
+            frame.scattered.width,
+            frame.scattered.height,
+            &frame.scattered.data,
+            None,
+        )
+        .map_err(|e| StageError::Output { stage: id.into(), path: png.clone(), message: e.to_string() })?;
+        outputs.push(png);
+        let fig12 = self.fig12(id, &dir, &table, &mut outputs)?;
+        let summary = PopSummary {
+            scene: fields.scene_path(ctx.base_dir).display().to_string(),
+            size: [g.camera.width, g.camera.height],
+            medium: media.medium_name.clone(),
+            voxels: media.medium.dims,
+            setup_ms: [v.import_ms, v.bvh_ms, g.distance_ms + g.colour_ms, voxel_ms],
+            lights: frame.lights.clone(),
+            ray_march_ms: frame.march_ms,
+            skipped: media.skipped.clone(),
+            fig12,
+        };
+        outputs.push(view::write_json(id, &dir.join("summary.json"), &summary)?);
+        let prop_ms: f64 = frame.lights.iter().map(|l| l.phases_ms.propagation + l.phases_ms.residuum).sum();
+        let mut line = format!(
+            "{}×{}, {} light(s), propagation {prop_ms:.0} ms, ray march {:.0} ms",
+            g.camera.width,
+            g.camera.height,
+            frame.lights.len(),
+            frame.march_ms
+        );
+        for r in &summary.fig12 {
+            line.push_str(&format!(
+                "; Fig. 12 g {}: collided fluence {:.0} %, image {:.0} % off",
+                r.g,
+                100.0 * r.slice.collided_error,
+                100.0 * r.image_error
+            ));
+        }
+        Ok(StageOutcome { outputs, summary: format!("{line} → {}", dir.display()) })
+    }
+}
+
+/// The Fig. 12 settings of a preset on an `n³` cube grid (Eq. 10's switch with the cube's `σ_s`).
+fn cube_settings(table: &PopPresetTable, g: f64, n: usize) -> (Settings, FlowTable) {
+    let def = &table.def;
+    let dx = 1.0 / n as f64;
+    let switch = def.switch_iteration(g, g, crate::effects::pop::fig12::SIGMA_S, dx, n);
+    let flow =
+        FlowTable::from_rows(table.flow_rows().to_vec()).unwrap_or_else(|_| FlowTable::exact(def.a_bins as usize));
+    let settings = Settings {
+        iterations: def.iterations as usize,
+        residuum: def.residuum,
+        switch_iteration: switch,
+        residuum_iterations: def.residuum_iterations as usize,
+        eps_l: def.eps_l,
+    };
+    (settings, flow)
+}
+
+/// The Fig. 12 values of `g`.
+pub const FIG12_G: [f64; 3] = [0.0, 0.7, 0.96];
+
+impl PopRender {
+    /// elek2014 Fig. 12 with this stage's preset on a 16³ grid (module doc): per `g`, the mid-slice
+    /// comparison, a plot of the collided radiance against the angle from the light in three cells on the
+    /// slice's centre line (`fig12_g<g>_radiance.png`), and POP's and the path tracer's cube images
+    /// (`fig12_g<g>_pop.png`, `fig12_g<g>_reference.png`).
+    fn fig12(
+        &self,
+        id: &str,
+        dir: &Path,
+        table: &PopPresetTable,
+        outputs: &mut Vec<std::path::PathBuf>,
+    ) -> Result<Vec<Fig12Row>, StageError> {
+        use crate::effects::pop::fig12;
+        if self.fig12_photons == 0 {
+            return Ok(Vec::new());
+        }
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the preset".into() };
+        let out =
+            |path: &Path, message: String| StageError::Output { stage: id.into(), path: path.to_path_buf(), message };
+        let n = 16;
+        let mut rows = Vec::new();
+        for g in FIG12_G {
+            let (settings, flow) = cube_settings(table, g, n);
+            let opts =
+                fig12::SliceOptions { cells: n, theta_bins: 18, photons: u64::from(self.fig12_photons), seed: 12 };
+            let slice = fig12::compare_slice(g, &flow, &settings, &opts).map_err(fail)?;
+            let size = self.fig12_size as usize;
+            let img = fig12::compare_image(g, &flow, &settings, n, [size, size], self.fig12_samples).map_err(fail)?;
+            let tag = format!("{g:.2}");
+            // Radiance against θ in three cells along the light, on the slice's centre line.
+            let mut series = Vec::new();
+            let centre = slice
+                .slice
+                .iter()
+                .map(|c| c.z)
+                .fold(f64::NAN, |m, z| if (z - 0.5).abs() < (m - 0.5).abs() || m.is_nan() { z } else { m });
+            for depth in [0.25, 0.5, 0.75] {
+                let Some(cell) = slice
+                    .slice
+                    .iter()
+                    .filter(|c| c.z == centre)
+                    .min_by(|a, b| (a.x - depth).abs().total_cmp(&(b.x - depth).abs()))
+                else {
+                    continue;
+                };
+                let nb = cell.pop_bins.len();
+                let theta = |b: usize| 180.0 * (b as f64 + 0.5) / nb as f64;
+                let pts = |v: &[f64]| -> Vec<(f64, f64)> {
+                    v.iter().enumerate().map(|(b, &r)| (theta(b), r.max(1e-6))).collect()
+                };
+                series.push(crate::report::plot::Series {
+                    name: format!("POP x = {:.2}", cell.x),
+                    points: pts(&cell.pop_bins),
+                });
+                series.push(crate::report::plot::Series {
+                    name: format!("light tracing x = {:.2}", cell.x),
+                    points: pts(&cell.mc_bins),
+                });
+            }
+            let png = dir.join(format!("fig12_g{tag}_radiance.png"));
+            let plot = crate::report::plot::Plot {
+                title: &format!("elek2014 Fig. 12, g = {g}: collided radiance in the mid slice"),
+                x_label: "angle from the light direction [deg]",
+                y_label: "collided radiance [W/(m² sr)] per unit irradiance",
+                x_scale: crate::report::plot::Scale::Linear,
+                y_scale: crate::report::plot::Scale::Log10,
+                series: &series,
+                width: 1024,
+                height: 720,
+            };
+            crate::report::plot::write_png(&png, &plot).map_err(|e| out(&png, e.to_string()))?;
+            outputs.push(png);
+            for (name, data) in [("pop", &img.pop), ("reference", &img.reference)] {
+                let png = dir.join(format!("fig12_g{tag}_{name}.png"));
+                let px: Vec<[f32; 3]> = data.iter().map(|c| c.map(|v| v as f32)).collect();
+                crate::image_io::write_png_preview(&png, size, size, &px, None)
+                    .map_err(|e| out(&png, e.to_string()))?;
+                outputs.push(png);
+            }
+            rows.push(Fig12Row {
+                g,
+                slice,
+                image_error: img.error,
+                image_noise: img.reference_noise,
+                image_ms: [img.pop_ms, img.reference_ms],
+            });
+        }
+        Ok(rows)
+    }
+}
+
+/// One point of the error-against-time ladder.
+#[derive(Debug, Clone, Serialize)]
+pub struct LadderPoint {
+    /// Grid cells per axis.
+    pub grid: usize,
+    /// Anisotropic iteration cap `M`.
+    pub iterations: usize,
+    /// Isotropic residuum on.
+    pub residuum: bool,
+    /// Propagation time (initialisation, anisotropic and residuum iterations) \[ms\].
+    pub propagation_ms: f64,
+    /// Iterations run (anisotropic + isotropic).
+    pub iterations_run: usize,
+    /// Relative RMSE of the composed image against the path-traced one, noise removed.
+    pub error: f64,
+}
+
+impl PopRender {
+    /// `voltab report --stages`: on the Fig. 12 cube with `g = 0.7`, POP's collided-fluence error in the
+    /// mid slice against a light-tracing reference of `max(fig12_photons, 400 000)` photons, against
+    /// POP's run time, over grid resolutions, iteration caps and with and without the isotropic residuum;
+    /// and the light tracer's own error (against the same reference) at increasing photon counts
+    /// (`<id>-pop.md`, `<id>-pop-error-vs-time.png`).
+    pub fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<String, StageError> {
+        use crate::effects::pop::fig12;
+        let out =
+            |path: &Path, message: String| StageError::Output { stage: id.into(), path: path.to_path_buf(), message };
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the preset".into() };
+        let table = self.open_table(id, ctx)?;
+        let g = 0.7;
+        let photons = u64::from(self.fig12_photons).max(400_000);
+        let mut points = Vec::new();
+        for grid in [8usize, 16, 32] {
+            let reference = fig12::reference_fluence(g, grid, photons, 99);
+            for iterations in [4usize, 8, 16, 32, 64, 128] {
+                for residuum in [false, true] {
+                    let (mut settings, flow) = cube_settings(&table, g, grid);
+                    settings.iterations = iterations;
+                    settings.residuum = residuum;
+                    let r = fig12::pop_fluence(g, grid, &flow, &settings).map_err(fail)?;
+                    points.push(LadderPoint {
+                        grid,
+                        iterations,
+                        residuum,
+                        propagation_ms: r.ms,
+                        iterations_run: r.iterations,
+                        error: fig12::slice_error(&r.collided, &reference.collided, grid),
+                    });
+                }
+            }
+        }
+        // The light tracer's own convergence on the 16³ tally.
+        let reference = fig12::reference_fluence(g, 16, photons, 99);
+        let mut mc_points = Vec::new();
+        for n in [1_000u64, 4_000, 16_000, 64_000] {
+            let r = fig12::reference_fluence(g, 16, n, 7);
+            mc_points.push((r.ms, fig12::slice_error(&r.collided, &reference.collided, 16)));
+        }
+        std::fs::create_dir_all(report_dir).map_err(|e| out(report_dir, e.to_string()))?;
+        let mut series = Vec::new();
+        for grid in [8usize, 16, 32] {
+            for residuum in [false, true] {
+                let pts: Vec<(f64, f64)> = points
+                    .iter()
+                    .filter(|p| p.grid == grid && p.residuum == residuum)
+                    .map(|p| (p.propagation_ms.max(1e-3), p.error.max(1e-6)))
+                    .collect();
+                let name = format!("POP {grid}³{}", if residuum { " + residuum" } else { "" });
+                series.push(crate::report::plot::Series { name, points: pts });
+            }
+        }
+        series.push(crate::report::plot::Series {
+            name: "light tracing".into(),
+            points: mc_points.iter().map(|&(t, e)| (t.max(1e-3), e.max(1e-6))).collect(),
+        });
+        let png = report_dir.join(format!("{id}-pop-error-vs-time.png"));
+        let plot = crate::report::plot::Plot {
+            title: &format!("{id}: POP on the elek2014 Fig. 12 cube (g = {g}), error against time"),
+            x_label: "run time [ms]",
+            y_label: "rel. RMS error of the collided fluence, mid slice",
+            x_scale: crate::report::plot::Scale::Log10,
+            y_scale: crate::report::plot::Scale::Log10,
+            series: &series,
+            width: 1024,
+            height: 720,
+        };
+        crate::report::plot::write_png(&png, &plot).map_err(|e| out(&png, e.to_string()))?;
+        let mut md = format!(
+            "## {id}: Principal-Ordinates Propagation (elek2014) on the Fig. 12 cube, g = {g}\n\nRelative RMS error of the collided fluence in the middle slice against light tracing ({photons} photons per grid), against run time, per grid and iteration cap, with and without the isotropic residuum.\n\n| grid | M | residuum | iterations run | ms | rel. error |\n|---:|---:|---|---:|---:|---:|\n"
+        );
+        for p in &points {
+            md.push_str(&format!(
+                "| {}³ | {} | {} | {} | {:.2} | {:.4} |\n",
+                p.grid,
+                p.iterations,
+                if p.residuum { "on" } else { "off" },
+                p.iterations_run,
+                p.propagation_ms,
+                p.error
+            ));
+        }
+        md.push_str("\nLight tracing against the reference (16³ tally):\n\n| ms | rel. error |\n|---:|---:|\n");
+        for (t, e) in &mc_points {
+            md.push_str(&format!("| {t:.1} | {e:.4} |\n"));
+        }
+        let md_path = report_dir.join(format!("{id}-pop.md"));
+        crate::cache::write_atomic(&md_path, md.as_bytes()).map_err(|e| out(&md_path, e.to_string()))?;
+        Ok(md)
+    }
+}
