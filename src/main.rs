@@ -170,6 +170,10 @@ enum Command {
         /// speed-up over path tracing at equal MSE.
         #[arg(long)]
         translucent: bool,
+        /// Only the POP benchmark of the pipeline's PopRender stages: the frame split into elek2014 Fig. 14's
+        /// phases and the isotropic residuum's speed-up over anisotropic propagation to convergence.
+        #[arg(long)]
+        pop: bool,
         /// Where the bake's tables are compiled (cached).
         #[arg(long, default_value = "out")]
         tables: PathBuf,
@@ -639,7 +643,19 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 }
             }
         }
-        Command::Bench { pipeline, json, only, tables_only, rays, rays_only, bake, effects, translucent, tables } => {
+        Command::Bench {
+            pipeline,
+            json,
+            only,
+            tables_only,
+            rays,
+            rays_only,
+            bake,
+            effects,
+            translucent,
+            pop,
+            tables,
+        } => {
             let mut rows = Vec::new();
             if bake {
                 if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
@@ -658,6 +674,20 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                     for s in p.stages() {
                         if let voltab::stages::StageDef::TranslucentRender(t) = s.def() {
                             let (text, r) = t.bench(s.id(), &ctx)?;
+                            if !json {
+                                println!("{text}");
+                            }
+                            rows.extend(r);
+                        }
+                    }
+                }
+            } else if pop {
+                if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
+                    let base = base_dir(&p);
+                    let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                    for s in p.stages() {
+                        if let voltab::stages::StageDef::PopRender(r) = s.def() {
+                            let (text, r) = r.bench(s.id(), &ctx)?;
                             if !json {
                                 println!("{text}");
                             }

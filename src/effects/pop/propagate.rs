@@ -68,15 +68,11 @@ impl FlowTable {
         Ok(Self { rows })
     }
 
-    /// `[front, side, back]` at anisotropy `a` (clamped to `[−1, 1]`).
+    /// `[front, side, back]` at anisotropy `a` (clamped to `[−1, 1]`), linearly interpolated as the
+    /// preset's reader does ([`crate::tables::pop_preset::lerp_flow`]).
     #[inline]
     pub fn lookup(&self, a: f64) -> [f64; 3] {
-        let n = self.rows.len() - 1;
-        let x = ((a.clamp(-1.0, 1.0) + 1.0) * 0.5 * n as f64).max(0.0);
-        let j = (x as usize).min(n - 1);
-        let f = x - j as f64;
-        let (p, q) = (self.rows[j], self.rows[j + 1]);
-        [p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1]), p[2] + f * (q[2] - p[2])]
+        crate::tables::pop_preset::lerp_flow(&self.rows, a)
     }
 }
 

@@ -18,7 +18,8 @@ use crate::effects::ViewCamera;
 /// Ray-marching settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MarchOptions {
-    /// Step length as a fraction of the smaller of voxel and cell size.
+    /// Step length as a fraction of the smaller of voxel and cell size (of the cell size when the
+    /// density is uniform).
     pub step_fraction: f64,
     /// Range width `σ_r` of the bilateral weight relative to the largest density (`INFINITY`:
     /// trilinear).
@@ -107,8 +108,10 @@ pub fn march(
     surface_distance: Option<&[f64]>,
     opts: &MarchOptions,
 ) -> Frame {
-    let step = opts.step_fraction.max(1e-3)
-        * medium.voxel_size().min_element().min(grid.size.iter().copied().fold(f64::INFINITY, f64::min));
+    // Steps resolve the finer of voxels and cells; a uniform density has no voxel detail to resolve.
+    let cell = grid.size.iter().copied().fold(f64::INFINITY, f64::min);
+    let uniform = medium.density.windows(2).all(|w| w[0] == w[1]);
+    let step = opts.step_fraction.max(1e-3) * if uniform { cell } else { medium.voxel_size().min_element().min(cell) };
     let (w, h) = (camera.width, camera.height);
     let inv_range = range_scale(medium, opts.range_sigma);
     let pixels: Vec<(Rgb, Rgb)> = (0..w * h)
