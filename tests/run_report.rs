@@ -20,7 +20,14 @@ fn no_arguments_runs_the_embedded_default_pipeline() {
         common::vtabs(&out).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
     assert_eq!(
         tables,
-        ["hg_dubouchet.vtab", "hg_extreme.vtab", "hg_grid.vtab", "ms_lobes_table2.vtab", "zh_dubouchet.vtab"]
+        [
+            "hg_dubouchet.vtab",
+            "hg_extreme.vtab",
+            "hg_grid.vtab",
+            "ms_lobes_table2.vtab",
+            "pop_realtime.vtab",
+            "zh_dubouchet.vtab"
+        ]
     );
     for png in ["hg_extreme_plot.png", "hg_grid_plot.png"] {
         let img = image::open(out.join(png)).unwrap();
