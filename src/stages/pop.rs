@@ -174,7 +174,6 @@ pub struct PopFrame {
 
 /// The POP settings of a preset table for a grid (Eq. 10's switch from the medium's mean `σ_s` and `g`).
 pub fn settings_for(table: &PopPresetTable, grid: &Grid) -> (Settings, FlowTable) {
-    let def = &table.def;
     let occupied: Vec<f64> = grid
         .cells
         .iter()
@@ -184,22 +183,32 @@ pub fn settings_for(table: &PopPresetTable, grid: &Grid) -> (Settings, FlowTable
     let sigma_s_mean = if occupied.is_empty() { 0.0 } else { occupied.iter().sum::<f64>() / occupied.len() as f64 };
     let g = (grid.g[0] + grid.g[1] + grid.g[2]) / 3.0;
     // The seeds start at a = g (propagate's module doc): the largest anisotropy Eq. 10 starts from.
-    // Uncapped: `propagate` switches only when m' is below the iteration budget.
-    let switch =
-        crate::tables::pop_preset::switch_iteration_raw(def.eps_a, g, g, sigma_s_mean, grid.size[2], grid.dims[2])
-            .unwrap_or(usize::MAX);
+    preset_settings(table, g, sigma_s_mean, grid.size[2], grid.dims[2])
+}
+
+/// The iteration settings and flow table of a preset, with Eq. 10's switch `m'` for phase mean cosine
+/// `g` (also the seeds' anisotropy), mean `σ_s`, cell size `dx` along the light and `grid_len` cells
+/// along it. Uncapped: `propagate` switches only when `m'` is below the iteration budget.
+fn preset_settings(
+    table: &PopPresetTable,
+    g: f64,
+    sigma_s_mean: f64,
+    dx: f64,
+    grid_len: usize,
+) -> (Settings, FlowTable) {
+    let def = &table.def;
+    let switch = crate::tables::pop_preset::switch_iteration_raw(def.eps_a, g, g, sigma_s_mean, dx, grid_len)
+        .unwrap_or(usize::MAX);
     let flow =
         FlowTable::from_rows(table.flow_rows().to_vec()).unwrap_or_else(|_| FlowTable::exact(def.a_bins as usize));
-    (
-        Settings {
-            iterations: def.iterations as usize,
-            residuum: def.residuum,
-            switch_iteration: switch,
-            residuum_iterations: def.residuum_iterations as usize,
-            eps_l: def.eps_l,
-        },
-        flow,
-    )
+    let settings = Settings {
+        iterations: def.iterations as usize,
+        residuum: def.residuum,
+        switch_iteration: switch,
+        residuum_iterations: def.residuum_iterations as usize,
+        eps_l: def.eps_l,
+    };
+    (settings, flow)
 }
 
 /// Propagates every directional light of `media` and ray-marches the camera view.
@@ -389,21 +398,7 @@ impl PopRender {
 
 /// The Fig. 12 settings of a preset on an `n³` cube grid (Eq. 10's switch with the cube's `σ_s`).
 fn cube_settings(table: &PopPresetTable, g: f64, n: usize) -> (Settings, FlowTable) {
-    let def = &table.def;
-    let dx = 1.0 / n as f64;
-    let switch =
-        crate::tables::pop_preset::switch_iteration_raw(def.eps_a, g, g, crate::effects::pop::fig12::SIGMA_S, dx, n)
-            .unwrap_or(usize::MAX);
-    let flow =
-        FlowTable::from_rows(table.flow_rows().to_vec()).unwrap_or_else(|_| FlowTable::exact(def.a_bins as usize));
-    let settings = Settings {
-        iterations: def.iterations as usize,
-        residuum: def.residuum,
-        switch_iteration: switch,
-        residuum_iterations: def.residuum_iterations as usize,
-        eps_l: def.eps_l,
-    };
-    (settings, flow)
+    preset_settings(table, g, crate::effects::pop::fig12::SIGMA_S, 1.0 / n as f64, n)
 }
 
 /// The Fig. 12 values of `g`.
