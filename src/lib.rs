@@ -36,6 +36,7 @@ pub mod cache;
 pub mod compile;
 pub mod container;
 pub mod effects;
+pub mod gpu;
 pub mod image_io;
 pub mod physics;
 pub mod pipeline;

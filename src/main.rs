@@ -42,6 +42,10 @@ enum Command {
         /// Compile only what these scenes need (glTF or USD; see `voltab plan`).
         #[arg(long, num_args = 1..)]
         scene: Vec<PathBuf>,
+        /// Where the real-time effects run: auto = the GPU when this build has the `gpu` feature
+        /// and an adapter is found, else the CPU (the choice and the reason are printed).
+        #[arg(long, value_enum, default_value_t = voltab::gpu::DeviceRequest::Auto)]
+        device: voltab::gpu::DeviceRequest,
     },
     /// Compile tables (incrementally: unchanged tables are not recomputed).
     Compile {
@@ -475,14 +479,24 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
         jobs: None,
         json: false,
         scene: bundled_scenes(),
+        device: voltab::gpu::DeviceRequest::Auto,
     });
+    let cpu_device = voltab::gpu::Device::Cpu;
     match cmd {
-        Command::Run { pipeline, out, jobs, json, scene } => {
+        Command::Run { pipeline, out, jobs, json, scene, device } => {
             let p = planned(load(&pipeline)?, &scene, json)?;
             let summary = compile(&p, &CompileOptions { out_dir: out.clone(), only: Vec::new(), jobs, progress })?;
             let mut stage_results = Vec::new();
             let base = base_dir(&p);
-            let ctx = voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress };
+            // The device is opened only when a stage can use it, and the choice is said once.
+            let device = if p.stages().iter().any(|s| s.def().uses_device()) {
+                let (d, message) = voltab::gpu::select(device).map_err(|e| anyhow::anyhow!(e))?;
+                eprintln!("{message}");
+                d
+            } else {
+                cpu_device.clone()
+            };
+            let ctx = voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress, device: &device };
             for s in p.stages() {
                 let missing: Vec<PathBuf> = s.def().scenes(&base).into_iter().filter(|f| !f.exists()).collect();
                 if !missing.is_empty() && !pipeline.exists() {
@@ -630,7 +644,8 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             }
             if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
                 let base = base_dir(&p);
-                let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                let ctx =
+                    voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress, device: &cpu_device };
                 for s in p.stages() {
                     if let Some(md) = s.def().report(s.id(), &ctx, &out)? {
                         print!("{md}");
@@ -660,7 +675,12 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             if bake {
                 if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
                     let base = base_dir(&p);
-                    let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                    let ctx = voltab::stages::StageContext {
+                        out_dir: &tables,
+                        base_dir: &base,
+                        progress,
+                        device: &cpu_device,
+                    };
                     for s in p.stages() {
                         if let voltab::stages::StageDef::BakeLightmaps(b) = s.def() {
                             rows.extend(b.bench(s.id(), &ctx)?);
@@ -670,7 +690,12 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             } else if translucent {
                 if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
                     let base = base_dir(&p);
-                    let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                    let ctx = voltab::stages::StageContext {
+                        out_dir: &tables,
+                        base_dir: &base,
+                        progress,
+                        device: &cpu_device,
+                    };
                     for s in p.stages() {
                         if let voltab::stages::StageDef::TranslucentRender(t) = s.def() {
                             let (text, r) = t.bench(s.id(), &ctx)?;
@@ -684,7 +709,12 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             } else if pop {
                 if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
                     let base = base_dir(&p);
-                    let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                    let ctx = voltab::stages::StageContext {
+                        out_dir: &tables,
+                        base_dir: &base,
+                        progress,
+                        device: &cpu_device,
+                    };
                     for s in p.stages() {
                         if let voltab::stages::StageDef::PopRender(r) = s.def() {
                             let (text, r) = r.bench(s.id(), &ctx)?;
@@ -698,7 +728,8 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             } else if effects {
                 let p = load(&pipeline)?;
                 let base = base_dir(&p);
-                let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress };
+                let ctx =
+                    voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress, device: &cpu_device };
                 for s in p.stages() {
                     let (text, r) = match s.def() {
                         voltab::stages::StageDef::EpipolarShadows(e) => e.bench(s.id(), &ctx)?,

@@ -64,6 +64,9 @@ pub struct StageContext<'a> {
     pub base_dir: &'a Path,
     /// Show progress bars (only on a terminal).
     pub progress: bool,
+    /// Where the real-time effects (`PopRender`, `EpipolarShadows`, `ImageFog`) run; the other
+    /// stages ignore it.
+    pub device: &'a crate::gpu::Device,
 }
 
 /// What a stage wrote.
@@ -214,6 +217,12 @@ impl StageDef {
             StageDef::PopRender(p) => p.report(id, ctx, report_dir).map(Some),
         }
     }
+
+    /// True for the real-time effects, which run on [`StageContext::device`].
+    pub fn uses_device(&self) -> bool {
+        matches!(self, StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) | StageDef::PopRender(_))
+    }
+
     /// Runs the stage on tables compiled into `ctx.out_dir`.
     pub fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
         match self {

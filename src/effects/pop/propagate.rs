@@ -68,6 +68,21 @@ impl FlowTable {
         Ok(Self { rows })
     }
 
+    /// Number of nodes on the anisotropy axis.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// True when the table has no rows (never: both constructors require ≥ 2).
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// Node `j`'s `[front, side, back]` (at `a = −1 + 2j/(len − 1)`).
+    pub fn row(&self, j: usize) -> [f64; 3] {
+        self.rows[j]
+    }
+
     /// `[front, side, back]` at anisotropy `a` (clamped to `[−1, 1]`), linearly interpolated as the
     /// preset's reader does ([`crate::tables::pop_preset::lerp_flow`]).
     #[inline]
@@ -294,7 +309,7 @@ pub fn propagate(
 }
 
 /// Sec. 4.1 sweep along `d`: the uncollided fluence at cell centres and the first-scattering seed.
-fn initialise(grid: &Grid, light: &DirectionalLight, occluder: &dyn Occluder) -> (Vec<Rgb>, Vec<Rgb>) {
+pub(crate) fn initialise(grid: &Grid, light: &DirectionalLight, occluder: &dyn Occluder) -> (Vec<Rgb>, Vec<Rgb>) {
     let n = grid.len();
     let mut uncollided = vec![[0.0; 3]; n];
     let mut seed = vec![[0.0; 3]; n];

@@ -1,0 +1,79 @@
+//! The WGSL sources of the GPU passes, one `.wgsl` file per pass under `src/gpu/shaders/`, and their
+//! validation by naga (the front end and validator wgpu itself compiles them with).
+//!
+//! **Input → output.** The shader files (compiled into the binary with `include_str!`) → a parsed
+//! and validated naga module, or a diagnostic naming the file, line and column. Every kernel goes
+//! through [`Shader::validate`] before wgpu sees it, and a test validates every file, so a typo in a
+//! shader fails `cargo test`, not a user's run. Each file's header comment documents its bindings.
+
+use wgpu::naga;
+
+/// One shader file.
+#[derive(Debug, Clone, Copy)]
+pub struct Shader {
+    /// File name under `src/gpu/shaders/`.
+    pub name: &'static str,
+    /// WGSL source.
+    pub source: &'static str,
+}
+
+/// POP: one gathering iteration (elek2014 Eqs. 2–6) and the iterate's energy per workgroup.
+pub const POP_STEP: Shader = Shader { name: "pop_step.wgsl", source: include_str!("shaders/pop_step.wgsl") };
+/// POP: the stopping rule (energy below `ε_L` of the seed), decided on the GPU.
+pub const POP_ENERGY: Shader = Shader { name: "pop_energy.wgsl", source: include_str!("shaders/pop_energy.wgsl") };
+/// POP: accumulation toward the eye (Eqs. 7–8) and of the collided fluence.
+pub const POP_ACCUMULATE: Shader =
+    Shader { name: "pop_accumulate.wgsl", source: include_str!("shaders/pop_accumulate.wgsl") };
+
+/// Every shader, for validation.
+pub const ALL: &[Shader] = &[POP_STEP, POP_ENERGY, POP_ACCUMULATE];
+
+impl Shader {
+    /// Parses and validates the source with naga.
+    ///
+    /// # Errors
+    /// The rendered diagnostic (`file:line:column` and the offending source line).
+    pub fn validate(&self) -> Result<naga::valid::ModuleInfo, String> {
+        let path = format!("src/gpu/shaders/{}", self.name);
+        let module =
+            naga::front::wgsl::parse_str(self.source).map_err(|e| e.emit_to_string_with_path(self.source, &path))?;
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::default())
+            .validate(&module)
+            .map_err(|e| e.emit_to_string_with_path(self.source, &path))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_shader_file_is_listed_and_validates() {
+        // A file under src/gpu/shaders that ALL forgets would never be validated.
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/gpu/shaders");
+        let mut files: Vec<String> = std::fs::read_dir(&dir)
+            .expect("shader folder")
+            .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+            .filter(|n| n.ends_with(".wgsl"))
+            .collect();
+        files.sort();
+        let mut listed: Vec<String> = ALL.iter().map(|s| s.name.to_string()).collect();
+        listed.sort();
+        assert_eq!(files, listed);
+        for s in ALL {
+            if let Err(e) = s.validate() {
+                panic!("{e}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_broken_shader_is_reported_with_its_file_and_line() {
+        let broken = Shader {
+            name: "broken.wgsl",
+            source: "@compute @workgroup_size(64)\nfn main() {\n  let x: f32 = 1u;\n}\n",
+        };
+        let e = broken.validate().unwrap_err();
+        assert!(e.contains("src/gpu/shaders/broken.wgsl:3:"), "{e}");
+    }
+}
