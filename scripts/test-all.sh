@@ -1,10 +1,29 @@
 #!/usr/bin/env bash
 # Runs every check CI runs: formatting, lints, the Rust test suite, docs, and the Python
-# interchange checks (in a venv it creates and fills from PyPI). Usage: scripts/test-all.sh
+# interchange checks (in a venv it creates and fills from PyPI), and the GPU path against the CPU on
+# a software Vulkan adapter (lavapipe, installed from Debian's packages when missing).
+# Usage: scripts/test-all.sh        (VOLTAB_GPU=0 scripts/test-all.sh: without the GPU feature and tests,
+#                                    for a machine that cannot install a Vulkan driver)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 step() { printf '\n==> %s\n' "$*"; }
+
+features=()
+if [ "${VOLTAB_GPU:-1}" != 0 ]; then
+  features=(--features gpu)
+  step "Vulkan software adapter for the GPU tests (Debian's mesa-vulkan-drivers: lavapipe)"
+  if ! ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1; then
+    as_root=()
+    [ "$(id -u)" = 0 ] || as_root=(sudo)
+    "${as_root[@]}" apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive "${as_root[@]}" apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
+  fi
+  ls /usr/share/vulkan/icd.d/lvp_icd*.json
+  # wgpu's Vulkan loader warns without a private runtime folder.
+  export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
+  chmod 700 "$XDG_RUNTIME_DIR"
+fi
 
 step "Python venv for interchange checks (.venv)"
 req="usd-core OpenImageIO jsonschema pytest numpy"
@@ -18,17 +37,18 @@ fi
 step "cargo fmt --check"
 cargo fmt --all -- --check
 
-step "cargo clippy (warnings are errors)"
-cargo clippy --all-targets --locked -- -D warnings
+step "cargo clippy (warnings are errors), with and without the gpu feature"
+cargo clippy --all-targets --locked "${features[@]}" -- -D warnings
+cargo clippy --lib --bins --locked -- -D warnings
 
-step "cargo test"
-cargo test --locked
+step "cargo test ${features[*]}"
+cargo test --locked "${features[@]}"
 
 step "main job end to end: the full default pipeline (release, opt-in test)"
 cargo test --release --locked --test run_report -- --ignored
 
 step "cargo doc (warnings are errors)"
-RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --quiet
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --quiet "${features[@]}"
 
 step "Python interchange checks"
 VOLTAB_BIN="$(pwd)/target/debug/voltab" .venv/bin/python -m pytest -q tests/python

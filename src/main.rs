@@ -178,6 +178,11 @@ enum Command {
         /// phases and the isotropic residuum's speed-up over anisotropic propagation to convergence.
         #[arg(long)]
         pop: bool,
+        /// Only the GPU benchmark of the pipeline's real-time effects: each frame on the CPU and on the
+        /// GPU side by side, with per-pass GPU times (timestamp queries where the adapter has them;
+        /// on a software adapter such as lavapipe these are CPU times). Needs the `gpu` feature.
+        #[arg(long)]
+        gpu: bool,
         /// Where the bake's tables are compiled (cached).
         #[arg(long, default_value = "out")]
         tables: PathBuf,
@@ -669,10 +674,28 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             effects,
             translucent,
             pop,
+            gpu,
             tables,
         } => {
             let mut rows = Vec::new();
-            if bake {
+            if gpu {
+                let (device, message) =
+                    voltab::gpu::select(voltab::gpu::DeviceRequest::Gpu).map_err(|e| anyhow::anyhow!(e))?;
+                eprintln!("{message}");
+                if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
+                    let base = base_dir(&p);
+                    let ctx =
+                        voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress, device: &device };
+                    for s in p.stages() {
+                        if let Some((text, r)) = s.def().bench_gpu(s.id(), &ctx)? {
+                            if !json {
+                                println!("{text}");
+                            }
+                            rows.extend(r);
+                        }
+                    }
+                }
+            } else if bake {
                 if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
                     let base = base_dir(&p);
                     let ctx = voltab::stages::StageContext {

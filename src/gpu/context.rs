@@ -81,16 +81,7 @@ pub struct Pass<'a> {
     pub items: u32,
 }
 
-/// GPU time of one phase.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct PassTime {
-    /// The phase name.
-    pub phase: String,
-    /// Seconds, summed over the phase's passes.
-    pub seconds: f64,
-    /// Passes summed.
-    pub passes: usize,
-}
+pub use super::PassTime;
 
 /// The device, its queue and what was learnt of the adapter.
 pub struct Gpu {
@@ -464,7 +455,7 @@ impl Words {
     }
     /// Pads with zeros to a multiple of 4 words (16 bytes, a WGSL `vec4` boundary).
     pub fn pad(mut self) -> Self {
-        while self.0.len() % 4 != 0 {
+        while !self.0.len().is_multiple_of(4) {
             self.0.push(0);
         }
         self

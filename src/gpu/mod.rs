@@ -28,9 +28,20 @@ pub mod pop;
 pub mod shaders;
 
 #[cfg(feature = "gpu")]
-pub use context::{Gpu, GpuError, PassTime};
+pub use context::{Gpu, GpuError};
 
 use serde::{Deserialize, Serialize};
+
+/// GPU time of one phase of a frame (written into stage summaries; empty on the CPU).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PassTime {
+    /// The phase name.
+    pub phase: String,
+    /// Seconds, summed over the phase's passes.
+    pub seconds: f64,
+    /// Passes summed.
+    pub passes: usize,
+}
 
 /// Where the real-time effects run, as asked on the command line (`--device`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]

@@ -218,6 +218,19 @@ impl StageDef {
         }
     }
 
+    /// `voltab bench --gpu`: the effect's frame on the CPU and on `ctx.device` side by side, with the
+    /// GPU's per-pass times; `None` for stages without a GPU path.
+    pub fn bench_gpu(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+    ) -> Result<Option<(String, Vec<crate::bench::BenchRow>)>, StageError> {
+        match self {
+            StageDef::PopRender(p) => p.bench_gpu(id, ctx).map(Some),
+            _ => Ok(None),
+        }
+    }
+
     /// True for the real-time effects, which run on [`StageContext::device`].
     pub fn uses_device(&self) -> bool {
         matches!(self, StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) | StageDef::PopRender(_))

@@ -94,8 +94,12 @@ pub struct LightRun {
     pub residual_energy: f64,
     /// Grid build and medium downsampling \[ms\].
     pub grid_ms: f64,
-    /// Phase times \[ms\].
+    /// Phase times \[ms\] (on the GPU: initialisation on the CPU, the iterations' GPU times).
     pub phases_ms: PhaseMs,
+    /// `"cpu"` or `"gpu"`: where the iterations ran.
+    pub device: &'static str,
+    /// GPU time per pass kind (empty on the CPU).
+    pub gpu_passes: Vec<crate::gpu::PassTime>,
 }
 
 /// [`PhaseTimes`] in milliseconds.
@@ -211,7 +215,30 @@ fn preset_settings(
     (settings, flow)
 }
 
-/// Propagates every directional light of `media` and ray-marches the camera view.
+/// Runs the propagation on `device`: the CPU solver, or its GPU twin ([`crate::gpu::pop`]) with
+/// the GPU's per-pass times.
+pub fn propagate_on(
+    device: &crate::gpu::Device,
+    grid: &Grid,
+    light: &crate::effects::pop::medium::DirectionalLight,
+    occluder: &dyn crate::effects::pop::grid::Occluder,
+    flow: &FlowTable,
+    settings: &Settings,
+    eye: glam::DVec3,
+) -> Result<(propagate::Propagation, Vec<crate::gpu::PassTime>), String> {
+    match device {
+        crate::gpu::Device::Cpu => {
+            Ok((propagate::propagate(grid, light, occluder, flow, settings, Observer::Eye(eye)), Vec::new()))
+        }
+        #[cfg(feature = "gpu")]
+        crate::gpu::Device::Gpu(gpu) => {
+            crate::gpu::pop::propagate(gpu, grid, light, occluder, flow, settings, Observer::Eye(eye))
+                .map_err(|e| e.to_string())
+        }
+    }
+}
+
+/// Propagates every directional light of `media` on `device` and ray-marches the camera view.
 pub fn render_frame(
     media: &SceneMedia,
     bvh: &SceneBvh,
@@ -219,6 +246,7 @@ pub fn render_frame(
     cam: &ViewCamera,
     distance: &[f64],
     range_sigma: f64,
+    device: &crate::gpu::Device,
 ) -> Result<PopFrame, String> {
     let occluder = BvhOccluder(bvh);
     let dims = table.def.grid.map(|v| v as usize);
@@ -234,7 +262,7 @@ pub fn render_frame(
         let grid = Grid::new(&media.medium, light.direction, dims, &occluder)?;
         let grid_ms = ms(t0);
         let (settings, flow) = settings_for(table, &grid);
-        let p = propagate::propagate(&grid, light, &occluder, &flow, &settings, Observer::Eye(cam.position));
+        let (p, gpu_passes) = propagate_on(device, &grid, light, &occluder, &flow, &settings, cam.position)?;
         let t0 = Instant::now();
         let f = render::march(&grid, &p.toward_eye, &media.medium, cam, Some(distance), &opts);
         march_ms += ms(t0);
@@ -255,6 +283,8 @@ pub fn render_frame(
             residual_energy: if seeded > 0.0 { p.energy.last().copied().unwrap_or(0.0) / seeded } else { 0.0 },
             grid_ms,
             phases_ms: p.times.into(),
+            device: device.name(),
+            gpu_passes,
         });
     }
     let to_img =
@@ -344,7 +374,8 @@ impl PopRender {
         let g = &v.gbuffer;
         let distance: Vec<f64> = g.distance.data.iter().map(|&d| f64::from(d)).collect();
         let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
-        let frame = render_frame(&media, &v.bvh, &table, &g.camera, &distance, self.range_sigma).map_err(fail)?;
+        let frame =
+            render_frame(&media, &v.bvh, &table, &g.camera, &distance, self.range_sigma, ctx.device).map_err(fail)?;
         let image = compose(&g.colour, &frame, true);
         let mut outputs = view::write_image(
             id,
@@ -623,7 +654,8 @@ impl PopRender {
         let mut runs = Vec::new();
         for _ in 0..5 {
             runs.push(
-                render_frame(&media, &v.bvh, &table, &v.gbuffer.camera, &distance, self.range_sigma).map_err(fail)?,
+                render_frame(&media, &v.bvh, &table, &v.gbuffer.camera, &distance, self.range_sigma, ctx.device)
+                    .map_err(fail)?,
             );
         }
         let median = |f: &dyn Fn(&PopFrame) -> f64| {
@@ -688,6 +720,55 @@ impl PopRender {
             candidate_ms: switched_ms,
             speedup: full_ms / switched_ms.max(1e-9),
             note: format!("fluence differs by {diff:.4} (rel. RMS); Eq. 10 m' = {}", settings.switch_iteration),
+        }];
+        Ok((text, rows))
+    }
+    /// `voltab bench --gpu`: the stage's frame with the propagation on the CPU and on `ctx.device`
+    /// side by side (median of 3 each), the GPU time of every pass kind, and how far the GPU frame's
+    /// scattered light is from the CPU's.
+    pub fn bench_gpu(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<crate::bench::BenchRow>), StageError> {
+        let fields = self.fields();
+        let table = self.open_table(id, ctx)?;
+        let v = fields.load(id, ctx, None)?;
+        let media = self.media(id, ctx, &v.scene)?;
+        let distance: Vec<f64> = v.gbuffer.distance.data.iter().map(|&d| f64::from(d)).collect();
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
+        let cam = &v.gbuffer.camera;
+        let frames = |device: &crate::gpu::Device| -> Result<Vec<PopFrame>, StageError> {
+            (0..3)
+                .map(|_| render_frame(&media, &v.bvh, &table, cam, &distance, self.range_sigma, device).map_err(fail))
+                .collect()
+        };
+        let cpu = frames(&crate::gpu::Device::Cpu)?;
+        let gpu = frames(ctx.device)?;
+        let median = |runs: &[PopFrame], f: fn(&LightRun) -> f64| {
+            let mut x: Vec<f64> = runs.iter().map(|r| r.lights.iter().map(f).sum::<f64>()).collect();
+            x.sort_by(f64::total_cmp);
+            x[x.len() / 2]
+        };
+        let iterate = |l: &LightRun| l.phases_ms.propagation + l.phases_ms.residuum;
+        let (cpu_ms, gpu_ms) = (median(&cpu, iterate), median(&gpu, iterate));
+        let diff = crate::effects::rel_rmse(&gpu[0].scattered, &cpu[0].scattered);
+        let mut text = format!(
+            "POP on {} ({}×{}, grid {:?}): iterations + accumulation CPU {cpu_ms:.2} ms, {} {gpu_ms:.2} ms ({:.2}×); scattered light differs by {diff:.2e} (rel. RMS)\nGPU passes (median-frame light 0):\n",
+            fields.scene_path(ctx.base_dir).display(),
+            cam.width,
+            cam.height,
+            table.def.grid,
+            ctx.device.name(),
+            cpu_ms / gpu_ms.max(1e-9),
+        );
+        if let Some(l) = gpu[0].lights.first() {
+            for p in &l.gpu_passes {
+                text.push_str(&format!("  {:<24} {:>3} passes {:>9.3} ms\n", p.phase, p.passes, 1e3 * p.seconds));
+            }
+        }
+        let rows = vec![crate::bench::BenchRow {
+            what: format!("{id}: POP iterations, CPU vs {}", ctx.device.name()),
+            baseline_ms: cpu_ms,
+            candidate_ms: gpu_ms,
+            speedup: cpu_ms / gpu_ms.max(1e-9),
+            note: format!("scattered light differs by {diff:.2e} (rel. RMS)"),
         }];
         Ok((text, rows))
     }

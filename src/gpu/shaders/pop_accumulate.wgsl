@@ -1,6 +1,6 @@
 // POP accumulation toward the eye: elek2014 Eqs. 7-8 with the phase convolution of
 // docs/design/pop.md (L_acc += w L f_hg(u, a g)), and the collided fluence (+= w L). One thread per
-// cell; runs only while state.active == 1 (the iterate it reads was computed). The CPU twin is
+// cell; runs only while state.running == 1 (the iterate it reads was computed). The CPU twin is
 // effects::pop::propagate::Accumulator::add for Observer::Eye.
 //
 // Bindings (group 0):
@@ -21,7 +21,7 @@ struct AccParams {
 }
 
 struct State {
-    active: u32,
+    running: u32,
     iterations: u32,
     anisotropic: u32,
     isotropic: u32,
@@ -48,7 +48,7 @@ fn hg(mu: f32, g: vec3<f32>) -> vec3<f32> {
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let n = (wid.x + wid.y * nwg.x) * 64u + lid;
-    if state.active != 1u || n >= params.cells {
+    if state.running != 1u || n >= params.cells {
         return;
     }
     let ln = l[n].xyz;

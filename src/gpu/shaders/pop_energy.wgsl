@@ -1,5 +1,5 @@
 // POP stopping rule: sums the per-workgroup energies of the newest iterate (written by
-// pop_step.wgsl), appends the total to state.energy and keeps state.active = 1 while it is above
+// pop_step.wgsl), appends the total to state.energy and keeps state.running = 1 while it is above
 // eps_L times the seeded energy (elek2014 Sec. 5.4; the CPU loop condition of
 // effects::pop::propagate). The GPU decides when to stop, so a whole frame's iterations are
 // recorded at once and the host never waits on an iteration. Dispatched with exactly 64 threads.
@@ -17,7 +17,7 @@ struct EnergyParams {
 }
 
 struct State {
-    active: u32,
+    running: u32,
     iterations: u32,
     anisotropic: u32,
     isotropic: u32,
@@ -44,11 +44,11 @@ fn main(@builtin(local_invocation_index) lid: u32) {
         }
         workgroupBarrier();
     }
-    if lid == 0u && state.active == 1u {
+    if lid == 0u && state.running == 1u {
         let e = sums[0];
         state.iterations += 1u;
         if params.iso == 1u { state.isotropic += 1u; } else { state.anisotropic += 1u; }
         state.energy[state.iterations] = e;
-        state.active = select(0u, 1u, e > params.stop);
+        state.running = select(0u, 1u, e > params.stop);
     }
 }

@@ -16,7 +16,7 @@
 //   6  l_out       storage  array<vec4<f32>>  [cells]    read_write
 //   7  a_out       storage  array<vec4<f32>>  [cells]    read_write
 //   8  partial     storage  array<f32>        [groups]   read_write: sum of L_out over the workgroup's cells
-//   9  state       storage  State                        read: the step runs only while state.active == 1
+//   9  state       storage  State                        read: the step runs only while state.running == 1
 
 struct StepParams {
     dims: vec3<u32>,
@@ -28,7 +28,7 @@ struct StepParams {
 }
 
 struct State {
-    active: u32,
+    running: u32,
     iterations: u32,
     anisotropic: u32,
     isotropic: u32,
@@ -69,7 +69,7 @@ fn main(
 ) {
     let group = wid.x + wid.y * nwg.x;
     let n = group * 64u + lid;
-    let run = state.active == 1u && n < params.cells;
+    let run = state.running == 1u && n < params.cells;
     var total = 0.0;
     if run {
         let dims = params.dims;
@@ -126,7 +126,7 @@ fn main(
         }
         workgroupBarrier();
     }
-    if lid == 0u && state.active == 1u {
+    if lid == 0u && state.running == 1u {
         partial[group] = sums[0];
     }
 }
