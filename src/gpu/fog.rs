@@ -60,11 +60,16 @@ pub fn check_options(opts: &FogOptions) -> Result<(), GpuError> {
     Ok(())
 }
 
+/// One level of the chains read back: colour and `(Y·W, Y, W)` per texel.
+type ChainLevel = (Vec<[f32; 3]>, Vec<[f32; 3]>);
+
 /// A filtered frame and, on request, the chain read back per level (`(rgb, spread)` per level).
 struct GpuFiltered {
     filtered: Filtered,
     image: Option<RgbImage>,
-    chain: Option<Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>)>>,
+    /// Read only by the per-level test (`read_chain = true`).
+    #[cfg_attr(not(test), allow(dead_code))]
+    chain: Option<Vec<ChainLevel>>,
     times: Vec<PassTime>,
 }
 
