@@ -510,6 +510,36 @@ mod tests {
     }
 
     #[test]
+    fn an_all_sky_frame_matches_the_cpu() {
+        // Every pixel D = ∞ in the outdoor scene's height fog (finite P upward, +∞ at and below the
+        // horizon): the camera looks across the horizon, so both kinds of sky pixel occur.
+        let cam = ViewCamera::new([0.0, 1.7, 0.0], [0.0, 0.1, -1.0], [0.0, 1.0, 0.0], 0.8, 64, 40).unwrap();
+        let (img, _) = synthetic(64, 40);
+        let dist = Image::filled(64, 40, f32::INFINITY);
+        let medium = FogMedium {
+            components: vec![FogComponent {
+                sigma_s: [0.02, 0.022, 0.025],
+                sigma_a: [0.001; 3],
+                g: 0.5,
+                density: Density::ExponentialHeight {
+                    rho: 0.8,
+                    falloff: 0.05,
+                    direction: [0.0, 1.0, 0.0],
+                    offset: [0.0; 3],
+                },
+            }],
+        };
+        let cpu = image_fog::render(&cam, &img, &dist, &medium, &FogOptions::default());
+        let (gpu, _) = render(test_gpu(), &cam, &img, &dist, &medium, &FogOptions::default()).unwrap();
+        assert!(finite(&gpu.image) && finite(&gpu.scattered));
+        assert!(cpu.attenuated.data.iter().any(|p| p[0] == 0.0) && cpu.attenuated.data.iter().any(|p| p[0] > 0.0));
+        let e = crate::effects::rel_rmse(&gpu.image, &cpu.image);
+        println!("all sky: rel RMSE {e:.3e}");
+        // Same ulp argument as the other frames (measured 1.2e-8).
+        assert!(e < 1e-7, "{e}");
+    }
+
+    #[test]
     fn options_not_ported_are_limit_errors_naming_them() {
         let (img, spread) = synthetic(8, 8);
         let sep = FogOptions { separation: Some(Default::default()), ..FogOptions::default() };
