@@ -25,8 +25,16 @@ pub const POP_ENERGY: Shader = Shader { name: "pop_energy.wgsl", source: include
 pub const POP_ACCUMULATE: Shader =
     Shader { name: "pop_accumulate.wgsl", source: include_str!("shaders/pop_accumulate.wgsl") };
 
+/// Image fog: one masked 4-tap MIP level of the colour and spread chains (iser2018 Secs. 4.2-4.3).
+pub const FOG_DOWNSAMPLE: Shader =
+    Shader { name: "fog_downsample.wgsl", source: include_str!("shaders/fog_downsample.wgsl") };
+/// Image fog: per-pixel level selection and B-spline/linear reconstruction (Secs. 4.2-4.3).
+pub const FOG_FETCH: Shader = Shader { name: "fog_fetch.wgsl", source: include_str!("shaders/fog_fetch.wgsl") };
+/// Image fog: compose L' = L_at + L'_sc (Sec. 4.4).
+pub const FOG_COMPOSE: Shader = Shader { name: "fog_compose.wgsl", source: include_str!("shaders/fog_compose.wgsl") };
+
 /// Every shader, for validation.
-pub const ALL: &[Shader] = &[POP_STEP, POP_ENERGY, POP_ACCUMULATE];
+pub const ALL: &[Shader] = &[POP_STEP, POP_ENERGY, POP_ACCUMULATE, FOG_DOWNSAMPLE, FOG_FETCH, FOG_COMPOSE];
 
 impl Shader {
     /// Parses and validates the source with naga.

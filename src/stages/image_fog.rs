@@ -132,6 +132,26 @@ pub struct FogSummary {
     pub gather: Option<GatherCheck>,
     /// Effect against path tracing.
     pub physics: Option<PhysicsCheck>,
+    /// Where the filter and compose ran: `"cpu"` or `"gpu"` (the integrals always run on the CPU).
+    #[serde(default)]
+    pub device: String,
+    /// GPU time per phase (`mip chain`, `fetch`, `compose`) when they ran on the GPU.
+    #[serde(default)]
+    pub gpu_phases: Vec<GpuPhase>,
+    /// Why the CPU path ran although a GPU was selected (an option the GPU path does not port).
+    #[serde(default)]
+    pub device_note: Option<String>,
+}
+
+/// GPU time of one phase of the effect.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct GpuPhase {
+    /// The phase.
+    pub phase: String,
+    /// Milliseconds, summed over its passes.
+    pub ms: f64,
+    /// Passes.
+    pub passes: usize,
 }
 
 super::view::impl_view_fields!(ImageFogStage);
@@ -195,7 +215,7 @@ impl ImageFogStage {
         let g = &v.gbuffer;
         let opts = self.options();
         let t0 = Instant::now();
-        let out = image_fog::render(&g.camera, &g.colour, &g.distance, &medium, &opts);
+        let (out, device, gpu_phases, device_note) = self.render_on_device(id, ctx, g, &medium, &opts)?;
         let total_ms = ms(t0);
         let mut outputs = view::write_image(
             id,
@@ -241,9 +261,16 @@ impl ImageFogStage {
             phases_ms: [s.integrals_ms, s.mip_ms, s.filter_ms, s.total_ms()],
             gather,
             physics,
+            device: device.to_string(),
+            gpu_phases,
+            device_note,
         };
         outputs.push(view::write_json(id, &dir.join("summary.json"), &summary)?);
-        let mut line = format!("{}×{}, fog {:.0} ms", g.camera.width, g.camera.height, s.total_ms());
+        let mut line =
+            format!("{}×{}, fog {:.0} ms on {}", g.camera.width, g.camera.height, s.total_ms(), summary.device);
+        if let Some(note) = &summary.device_note {
+            line.push_str(&format!(" ({note})"));
+        }
         if let Some(c) = &summary.gather {
             line.push_str(&format!(
                 "; vs gathering on {} px: error {:.2} %, {:.0}× faster",
@@ -262,6 +289,45 @@ impl ImageFogStage {
             ));
         }
         Ok(StageOutcome { outputs, summary: format!("{line} → {}", dir.display()) })
+    }
+
+    /// The effect on the selected device: the GPU filter and compose ([`crate::gpu::fog::render`]) when
+    /// the run has a GPU, else (or for options the GPU path does not port, said in the note) the CPU.
+    #[allow(clippy::type_complexity)]
+    fn render_on_device(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+        g: &GBuffer,
+        medium: &FogMedium,
+        opts: &FogOptions,
+    ) -> Result<(image_fog::FogOutput, &'static str, Vec<GpuPhase>, Option<String>), StageError> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = ctx.device.gpu() {
+            return match crate::gpu::fog::render(gpu, &g.camera, &g.colour, &g.distance, medium, opts) {
+                Ok((out, times)) => {
+                    let phases = times
+                        .into_iter()
+                        .map(|t| GpuPhase { phase: t.phase, ms: t.seconds * 1e3, passes: t.passes })
+                        .collect();
+                    Ok((out, ctx.device.name(), phases, None))
+                }
+                Err(crate::gpu::GpuError::Limit(why)) => Ok((
+                    image_fog::render(&g.camera, &g.colour, &g.distance, medium, opts),
+                    "cpu",
+                    Vec::new(),
+                    Some(format!("GPU selected but the CPU path ran: {why}")),
+                )),
+                Err(e) => Err(StageError::Input {
+                    stage: id.into(),
+                    message: format!("GPU image fog failed: {e}"),
+                    help: "run with --device cpu".into(),
+                }),
+            };
+        }
+        #[cfg(not(feature = "gpu"))]
+        let _ = id;
+        Ok((image_fog::render(&g.camera, &g.colour, &g.distance, medium, opts), ctx.device.name(), Vec::new(), None))
     }
 
     /// The scene (camera, fog) with colour and distance buffers read from another renderer's EXR files.
