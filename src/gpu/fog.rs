@@ -4,7 +4,7 @@
 //! **Input → output.** The same inputs as [`image_fog::render`] (colour and distance buffers, camera,
 //! analytic [`FogMedium`], [`FogOptions`]) → the same [`FogOutput`] (final, attenuated and filtered
 //! scattered images, level and spread per pixel), plus the GPU time of each phase; and
-//! [`filter`], shaped like [`image_fog::filter::filter`] (`L_sc` + spread → `L'_sc` + levels).
+//! [`filter()`], shaped like [`image_fog::filter::filter`] (`L_sc` + spread → `L'_sc` + levels).
 //!
 //! **Paper.** iser2018 Sec. 4.2 (MIP chain with the 4-tap kernel `{0.13, 0.37, 0.37, 0.13}`, level
 //! from the spread), Sec. 4.3 (masking, luminance-weighted spread chain, level re-selection from the
@@ -229,7 +229,7 @@ pub fn filter(
 /// doc). `stats` holds the CPU integrals time and the GPU phase times (MIP chain; fetch + compose).
 ///
 /// # Errors
-/// As [`filter`]; also [`GpuError::Limit`] when the buffers do not have the camera's size.
+/// As [`filter()`]; also [`GpuError::Limit`] when the buffers do not have the camera's size.
 pub fn render(
     gpu: &Gpu,
     cam: &ViewCamera,

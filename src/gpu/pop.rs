@@ -7,7 +7,7 @@
 //! energy of every iterate and the iteration counts), plus the GPU time of each phase.
 //!
 //! **Split.** The Sec. 4.1 transmittance sweep and first-scattering seed stay on the CPU
-//! ([`propagate::initialise`]: they cast shadow rays through the scene's BVH) and are uploaded once.
+//! (`propagate::initialise`: they cast shadow rays through the scene's BVH) and are uploaded once.
 //! Each iteration is three passes: `pop_step.wgsl` (gather the six neighbours, Eqs. 2–6, ping-pong
 //! buffers, and the iterate's energy per workgroup), `pop_accumulate.wgsl` (Eqs. 7–8) and
 //! `pop_energy.wgsl` (sum the energy, append it, and clear `running` once it is below `ε_L` of the
