@@ -280,6 +280,25 @@ impl Gpu {
         })
     }
 
+    /// Binds `buffers` to group 0 of `kernel` at the given binding numbers (for kernels whose shader
+    /// declares bindings the entry point does not use, which wgpu leaves out of its layout).
+    pub fn bind_at(&self, kernel: &Kernel, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&kernel.name),
+            layout: &kernel.pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        })
+    }
+
+    /// The largest storage buffer the adapter binds \[bytes\].
+    pub fn max_binding(&self) -> u64 {
+        self.max_buffer
+    }
+
     /// The 2-D workgroup grid of a pass over `items` items (see the module doc).
     pub fn groups(&self, items: u32) -> (u32, u32) {
         let groups = items.div_ceil(WORKGROUP).max(1);

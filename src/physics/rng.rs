@@ -24,6 +24,12 @@ impl StreamKey {
         Self { table: u64::from_le_bytes(w), cell }
     }
 
+    /// The table's word as every stream folds it in first (`mix(table ^ IV)`), for GPU kernels that
+    /// rebuild [`StreamKey::uniform`] from it.
+    pub(crate) fn table_word(&self) -> u64 {
+        mix(self.table ^ 0x6a09_e667_f3bc_c909)
+    }
+
     /// Uniform value in [0, 1) for sample `sample`, dimension `dim` of this stream.
     #[inline]
     pub fn uniform(&self, sample: u64, dim: u32) -> f64 {

@@ -25,7 +25,7 @@ use super::rectify::{Geo, Setup};
 use super::{EpiMedium, EpipolarOptions, exp_integral};
 
 const GAMMA_NODES: usize = 128;
-const BETA_NODES: usize = 64;
+pub(crate) const BETA_NODES: usize = 64;
 
 /// The factorisation of one frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,9 +41,9 @@ pub struct Factorization {
     /// `Γ[k][i][j]`, flattened `(k·rank + i)·bins + j`.
     pub gamma_fn: Vec<f64>,
     /// `ln tan(β/2)` at the ends of the `β` range.
-    x_range: (f64, f64),
+    pub(crate) x_range: (f64, f64),
     /// `s_i·V[n][i]` flattened `(k·rank + i)·BETA_NODES + n`.
-    bnode: Vec<f64>,
+    pub(crate) bnode: Vec<f64>,
     geo: Geo,
     phase_g: EpiMedium,
     /// `s_N/s_0` of the first kernel (0 when the rank is complete).
@@ -53,13 +53,25 @@ pub struct Factorization {
 impl Factorization {
     /// Factorises the frame's integrand.
     pub fn new(setup: &Setup, medium: &EpiMedium, opts: &EpipolarOptions) -> Factorization {
+        Factorization::from_extent(setup.geo, setup.beta_range, setup.gamma_max, medium, opts)
+    }
+
+    /// Factorises the integrand over `β ∈ beta_range`, `γ ∈ [0, gamma_max]` (what [`Factorization::new`]
+    /// reads off a [`Setup`]; the GPU path measures `gamma_max` on the device).
+    pub fn from_extent(
+        geo: Geo,
+        beta_range: (f64, f64),
+        gamma_max: f64,
+        medium: &EpiMedium,
+        opts: &EpipolarOptions,
+    ) -> Factorization {
         let st = medium.sigma_t();
         let grey = st[0] == st[1] && st[1] == st[2];
         let kernels = if grey { 1 } else { 3 };
         let bins = opts.gamma_bins.clamp(2, 1 << 20);
-        let gmax = if setup.gamma_max.is_finite() && setup.gamma_max > 0.0 { setup.gamma_max } else { 1e-6 };
+        let gmax = if gamma_max.is_finite() && gamma_max > 0.0 { gamma_max } else { 1e-6 };
         let dgamma = gmax / bins as f64;
-        let (mut beta_lo, mut beta_hi) = setup.beta_range;
+        let (mut beta_lo, mut beta_hi) = beta_range;
         if !(beta_lo.is_finite() && beta_hi.is_finite() && beta_hi > beta_lo) {
             beta_lo = 1e-3;
             beta_hi = beta_lo + 1e-3;
@@ -71,7 +83,6 @@ impl Factorization {
             .collect();
         let gnodes: Vec<usize> =
             (0..GAMMA_NODES).map(|m| ((m * (bins - 1)) as f64 / (GAMMA_NODES - 1) as f64).round() as usize).collect();
-        let geo = setup.geo;
         let mut gamma_fn = vec![0.0; kernels * rank * bins];
         let mut bnode = vec![0.0; kernels * rank * BETA_NODES];
         let mut residual = 0.0;

@@ -143,29 +143,33 @@ fn first_at_or_below(cots: &[f64], c: f64, g: usize) -> usize {
     }
 }
 
-/// Integrates one slice (module doc).
-pub fn integrate_slice(
+/// Step (1) of [`integrate_slice`]: the slice's rectified shadow map as depth-mode events.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Prefiltered {
+    /// `(β index, γ bin, sub-sample count)` per mode that terminates inside the slice, bins in
+    /// increasing order and modes by increasing `β` within a bin.
+    pub events: Vec<(u32, u32, u32)>,
+    /// Whether the event removes its bin's exact remainder (the last mode of a fully blocked bin).
+    pub exact_last: Vec<bool>,
+    /// Light modulation at each bin's centre (1 for an untextured directional light).
+    pub modul: Vec<[f64; 3]>,
+}
+
+/// Rectifies the shadow map of slice `s` over its first `nb` bins of width `dg` into depth modes
+/// (module doc, step 1).
+pub(crate) fn prefilter_slice(
     setup: &Setup,
-    fac: &Factorization,
     s: &Slice,
+    nb: usize,
+    dg: f64,
     light: &EpiLight,
     shadow: &ShadowMap,
-    medium: &EpiMedium,
     opts: &EpipolarOptions,
-) -> SliceResult {
-    let t0 = Instant::now();
+) -> Prefiltered {
     let nbeta = s.betas.len();
-    let dg = fac.dgamma;
-    let gmax = s.gend.iter().copied().fold(0.0f64, f64::max);
-    let nb = (((gmax / dg).ceil() as usize) + 1).clamp(1, fac.bins);
-    let ch = if fac.kernels == 3 || light.texture().is_some() { 3 } else { 1 };
-    let rank = fac.rank;
-    let lanes = ch * rank;
     let sub = if opts.depth_modes > 1 { 4 } else { 1 };
     let cots: Vec<f64> = s.betas.iter().map(|b| b.cos() / b.sin()).collect();
     let plain = matches!(light, EpiLight::Directional { texture: None, .. });
-
-    // (1) Rectified shadow map with depth modes → events (β index, bin, sub-sample count).
     let mut events: Vec<(u32, u32, u32)> = Vec::new();
     let mut exact_last: Vec<bool> = Vec::new();
     let mut modul = vec![[1.0f64; 3]; nb];
@@ -205,6 +209,31 @@ pub fn integrate_slice(
             exact_last[last] = true;
         }
     }
+    Prefiltered { events, exact_last, modul }
+}
+
+/// Integrates one slice (module doc).
+pub fn integrate_slice(
+    setup: &Setup,
+    fac: &Factorization,
+    s: &Slice,
+    light: &EpiLight,
+    shadow: &ShadowMap,
+    medium: &EpiMedium,
+    opts: &EpipolarOptions,
+) -> SliceResult {
+    let t0 = Instant::now();
+    let nbeta = s.betas.len();
+    let dg = fac.dgamma;
+    let gmax = s.gend.iter().copied().fold(0.0f64, f64::max);
+    let nb = (((gmax / dg).ceil() as usize) + 1).clamp(1, fac.bins);
+    let ch = if fac.kernels == 3 || light.texture().is_some() { 3 } else { 1 };
+    let rank = fac.rank;
+    let lanes = ch * rank;
+    let sub = if opts.depth_modes > 1 { 4 } else { 1 };
+
+    // (1) Rectified shadow map with depth modes → events (β index, bin, sub-sample count).
+    let Prefiltered { events, exact_last, modul } = prefilter_slice(setup, s, nb, dg, light, shadow, opts);
     let t1 = Instant::now();
 
     // (2) Tree of Γ_i(γ)·M·Δγ.

@@ -46,7 +46,7 @@ pub mod shadow_map;
 pub mod tree;
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 
 use std::time::Instant;
 

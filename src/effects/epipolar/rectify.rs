@@ -110,6 +110,29 @@ pub struct Slice {
     pub gend: Vec<f64>,
 }
 
+/// Where one slice lies before its depth is rectified: its screen angle, half-plane axis and the
+/// `n` view-ray angles `β_k = lo + (hi − lo)·k/(n − 1)` it samples.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SliceLayout {
+    /// Screen angle relative to [`Setup::ref_dir`] \[rad\].
+    pub angle: f64,
+    /// World-space unit axis of the slice's half-plane, ⟂ the light direction.
+    pub u: DVec3,
+    /// Smallest `β`.
+    pub beta_lo: f64,
+    /// Largest `β`.
+    pub beta_hi: f64,
+    /// Samples (at least 2).
+    pub n: usize,
+}
+
+impl SliceLayout {
+    /// `β` of sample `k`.
+    pub fn beta(&self, k: usize) -> f64 {
+        self.beta_lo + (self.beta_hi - self.beta_lo) * k as f64 / (self.n - 1) as f64
+    }
+}
+
 /// The slices of one frame and what unrectification needs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Setup {
@@ -149,6 +172,38 @@ impl Setup {
         shadow: &ShadowMap,
         opts: &EpipolarOptions,
     ) -> Setup {
+        let (mut setup, layout) = Setup::layout(cam, light, opts);
+        let (eye, geo, t) = (setup.eye, setup.geo, setup.geo.toward());
+        setup.slices = layout
+            .par_iter()
+            .map(|l| {
+                let mut betas = Vec::with_capacity(l.n);
+                let mut gend = Vec::with_capacity(l.n);
+                for k in 0..l.n {
+                    let beta = l.beta(k);
+                    let v = beta.cos() * t + beta.sin() * l.u;
+                    let dpx = match cam.project_dir(v) {
+                        Some((q, true)) => depth_at(depth, q[0].max(0.0) as usize, q[1].max(0.0) as usize),
+                        _ => f32::INFINITY,
+                    };
+                    let ext = view_extent(eye, v, dpx, shadow.bounds);
+                    betas.push(beta);
+                    gend.push(geo.gamma_end(eye, v, beta, ext));
+                }
+                Slice { angle: l.angle, u: l.u, betas, gend }
+            })
+            .collect();
+        setup.beta_range = setup.slices.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| {
+            (lo.min(s.betas[0]), hi.max(*s.betas.last().unwrap_or(&0.0)))
+        });
+        setup.gamma_max = setup.slices.iter().flat_map(|s| s.gend.iter().copied()).fold(0.0f64, f64::max);
+        setup
+    }
+
+    /// The slice layout alone (Sec. 8): a [`Setup`] without slices (`beta_range` from the layout,
+    /// `gamma_max` 0) and the slices sorted by angle, before any depth is read. The GPU path
+    /// rectifies the depth on the device from this.
+    pub fn layout(cam: &ViewCamera, light: &EpiLight, opts: &EpipolarOptions) -> (Setup, Vec<SliceLayout>) {
         let eye = cam.position;
         let geo = Geo::new(eye, light);
         let t = geo.toward();
@@ -202,7 +257,7 @@ impl Setup {
         }
 
         let spp = if opts.samples_per_pixel.is_finite() { opts.samples_per_pixel.clamp(1e-3, 64.0) } else { 1.0 };
-        let mut slices: Vec<Slice> = dirs
+        let mut slices: Vec<SliceLayout> = dirs
             .par_iter()
             .filter_map(|&d| {
                 // Clip e + s·d, s ≥ ring, to the raster rectangle.
@@ -230,40 +285,27 @@ impl Setup {
                     return None;
                 }
                 let n = (((s1 - s0) * spp).ceil() as usize + 1).max(2);
-                let mut betas = Vec::with_capacity(n);
-                let mut gend = Vec::with_capacity(n);
-                for k in 0..n {
-                    let beta = lo + (hi - lo) * k as f64 / (n - 1) as f64;
-                    let v = beta.cos() * t + beta.sin() * u;
-                    let dpx = match cam.project_dir(v) {
-                        Some((q, true)) => depth_at(depth, q[0].max(0.0) as usize, q[1].max(0.0) as usize),
-                        _ => f32::INFINITY,
-                    };
-                    let ext = view_extent(eye, v, dpx, shadow.bounds);
-                    betas.push(beta);
-                    gend.push(geo.gamma_end(eye, v, beta, ext));
-                }
-                Some(Slice { angle: rel_angle(ref_dir, d), u, betas, gend })
+                Some(SliceLayout { angle: rel_angle(ref_dir, d), u, beta_lo: lo, beta_hi: hi, n })
             })
             .collect();
         slices.sort_by(|a, b| a.angle.total_cmp(&b.angle));
-        let beta_range = slices.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| {
-            (lo.min(s.betas[0]), hi.max(*s.betas.last().unwrap_or(&0.0)))
-        });
-        let gamma_max = slices.iter().flat_map(|s| s.gend.iter().copied()).fold(0.0f64, f64::max);
-        Setup {
+        let beta_range = slices
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| (lo.min(s.beta_lo), hi.max(s.beta_hi)));
+        let setup = Setup {
             eye,
             geo,
             epipole,
             ref_dir,
             inside,
             ring,
-            slices,
+            slices: Vec::new(),
             beta_range,
-            gamma_max,
+            gamma_max: 0.0,
             width: cam.width,
             height: cam.height,
-        }
+        };
+        (setup, slices)
     }
 
     /// Whether pixel `(x, y)` is ray marched (its centre within the ring, or no slice exists).

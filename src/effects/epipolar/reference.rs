@@ -33,7 +33,7 @@ pub enum Visibility<'a> {
 }
 
 /// Stream-key table word of the marchers' jitter.
-const JITTER_TABLE: u64 = 0xba4a_2010_e919_0001;
+pub(crate) const JITTER_TABLE: u64 = 0xba4a_2010_e919_0001;
 
 /// Everything a marched pixel needs.
 #[derive(Debug, Clone, Copy)]

@@ -12,13 +12,13 @@ use crate::effects::gbuffer::distance_image;
 use crate::physics::rng::StreamKey;
 use crate::scene::bvh::{SceneBvh, procedural};
 
-const BOX: ([f64; 3], [f64; 3]) = ([-20.0; 3], [20.0; 3]);
+pub(crate) const BOX: ([f64; 3], [f64; 3]) = ([-20.0; 3], [20.0; 3]);
 
-fn medium(s: f64, a: f64, g: f64) -> EpiMedium {
+pub(crate) fn medium(s: f64, a: f64, g: f64) -> EpiMedium {
     EpiMedium { sigma_s: [s; 3], sigma_a: [a; 3], g }
 }
 
-fn dir_light(t_toward: [f64; 3]) -> EpiLight {
+pub(crate) fn dir_light(t_toward: [f64; 3]) -> EpiLight {
     let l = -DVec3::from_array(t_toward).normalize();
     EpiLight::Directional { direction: l.to_array(), irradiance: [2.0, 3.0, 4.0], texture: None }
 }
@@ -33,7 +33,7 @@ fn quad(name: &str, y: f32, x0: f32, x1: f32, z0: f32, z1: f32) -> crate::scene:
 }
 
 /// A scene whose only triangle lies far outside every test view: nothing shadows the view volume.
-fn empty_bvh() -> SceneBvh {
+pub(crate) fn empty_bvh() -> SceneBvh {
     let tri = procedural::mesh(
         "speck",
         // Below and behind the eye: for every test light its shadow column leaves the box at once.
@@ -44,7 +44,7 @@ fn empty_bvh() -> SceneBvh {
     SceneBvh::build(&procedural::scene(vec![tri]))
 }
 
-fn camera(w: usize, h: usize) -> ViewCamera {
+pub(crate) fn camera(w: usize, h: usize) -> ViewCamera {
     ViewCamera::new([0.0; 3], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 1.0, w, h).unwrap()
 }
 
@@ -74,7 +74,7 @@ fn max_rel(a: &RgbImage, r: &RgbImage) -> f64 {
         .fold(0.0, f64::max)
 }
 
-fn all_finite_nonneg(img: &RgbImage) -> bool {
+pub(crate) fn all_finite_nonneg(img: &RgbImage) -> bool {
     img.data.iter().all(|p| p.iter().all(|c| c.is_finite() && *c >= 0.0))
 }
 
@@ -265,7 +265,7 @@ fn half_plane_shadow_matches_the_analytic_lit_interval() {
     assert!(ee < 0.035, "epipolar {ee} ({:?})", out.stats);
 }
 
-fn sphere_scene() -> SceneBvh {
+pub(crate) fn sphere_scene() -> SceneBvh {
     let mut meshes = Vec::new();
     for (i, c) in [[-3.0, 1.0, -9.0], [2.0, -1.0, -12.0], [0.5, 2.5, -7.0], [-1.0, -2.0, -15.0]].iter().enumerate() {
         meshes.push(procedural::icosphere(&format!("s{i}"), *c, 1.2, 2));
