@@ -33,8 +33,50 @@ pub const FOG_FETCH: Shader = Shader { name: "fog_fetch.wgsl", source: include_s
 /// Image fog: compose L' = L_at + L'_sc (Sec. 4.4).
 pub const FOG_COMPOSE: Shader = Shader { name: "fog_compose.wgsl", source: include_str!("shaders/fog_compose.wgsl") };
 
+/// Epipolar god rays: the declarations all `epi_*` passes share (parameters, camera, shadow-map and
+/// light functions). Prepended to each pass's source: WGSL has no include.
+pub const EPI_COMMON: Shader = Shader { name: "epi_common.wgsl", source: include_str!("shaders/epi_common.wgsl") };
+/// Epipolar: depth rectification per slice sample (baran2010 Sec. 3, Sec. 9).
+pub const EPI_RECTIFY: Shader = Shader {
+    name: "epi_rectify.wgsl",
+    source: concat!(include_str!("shaders/epi_common.wgsl"), include_str!("shaders/epi_rectify.wgsl")),
+};
+/// Epipolar: rectified shadow map, depth modes and light modulation per (slice, γ bin) (Secs. 6–7).
+pub const EPI_PREFILTER: Shader = Shader {
+    name: "epi_prefilter.wgsl",
+    source: concat!(include_str!("shaders/epi_common.wgsl"), include_str!("shaders/epi_prefilter.wgsl")),
+};
+/// Epipolar: per-lane scale and integer leaves of each slice's integrand (Sec. 6).
+pub const EPI_QUANTISE: Shader = Shader {
+    name: "epi_quantise.wgsl",
+    source: concat!(include_str!("shaders/epi_common.wgsl"), include_str!("shaders/epi_quantise.wgsl")),
+};
+/// Epipolar: in-scatter per view ray from the partial sums of the visible leaves (Secs. 4–7).
+pub const EPI_INTEGRATE: Shader = Shader {
+    name: "epi_integrate.wgsl",
+    source: concat!(include_str!("shaders/epi_common.wgsl"), include_str!("shaders/epi_integrate.wgsl")),
+};
+/// Epipolar: unrectification, transmittance and the ray-marched ring (Secs. 3, 6).
+pub const EPI_UNRECTIFY: Shader = Shader {
+    name: "epi_unrectify.wgsl",
+    source: concat!(include_str!("shaders/epi_common.wgsl"), include_str!("shaders/epi_unrectify.wgsl")),
+};
+
 /// Every shader, for validation.
-pub const ALL: &[Shader] = &[POP_STEP, POP_ENERGY, POP_ACCUMULATE, FOG_DOWNSAMPLE, FOG_FETCH, FOG_COMPOSE];
+pub const ALL: &[Shader] = &[
+    POP_STEP,
+    POP_ENERGY,
+    POP_ACCUMULATE,
+    FOG_DOWNSAMPLE,
+    FOG_FETCH,
+    FOG_COMPOSE,
+    EPI_COMMON,
+    EPI_RECTIFY,
+    EPI_PREFILTER,
+    EPI_QUANTISE,
+    EPI_INTEGRATE,
+    EPI_UNRECTIFY,
+];
 
 impl Shader {
     /// Parses and validates the source with naga.
