@@ -26,6 +26,7 @@ impl StreamKey {
 
     /// The table's word as every stream folds it in first (`mix(table ^ IV)`), for GPU kernels that
     /// rebuild [`StreamKey::uniform`] from it.
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
     pub(crate) fn table_word(&self) -> u64 {
         mix(self.table ^ 0x6a09_e667_f3bc_c909)
     }

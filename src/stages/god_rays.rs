@@ -17,10 +17,12 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
+use super::image_fog::GpuPhase;
 use super::view::{self, ms};
 use super::{StageContext, StageError, StageOutcome};
 use crate::bench::BenchRow;
-use crate::effects::epipolar::{self, EpiLight, EpiMedium, EpipolarOptions, EpipolarStats};
+use crate::effects::epipolar::{self, EpiLight, EpiMedium, EpipolarOptions, EpipolarOutput, EpipolarStats, ShadowMap};
+use crate::effects::gbuffer::GBuffer;
 use crate::scene::Scene;
 use crate::tables::FieldIssue;
 
@@ -95,6 +97,16 @@ pub struct GodRaysSummary {
     pub mean_inscatter: [f64; 3],
     /// Comparison with the marcher.
     pub reference: Option<GodRaysCheck>,
+    /// Where the effect ran: `"cpu"` or `"gpu"` (the shadow map, slice layout and SVD always run on
+    /// the CPU).
+    #[serde(default)]
+    pub device: String,
+    /// GPU time per phase (`rectify`, `prefilter`, `integrate`, `unrectify`) when it ran on the GPU.
+    #[serde(default)]
+    pub gpu_phases: Vec<GpuPhase>,
+    /// Why the CPU path ran although a GPU was selected (a limit of the device path).
+    #[serde(default)]
+    pub device_note: Option<String>,
 }
 
 super::view::impl_view_fields!(EpipolarShadows);
@@ -199,7 +211,7 @@ impl EpipolarShadows {
         let shadow = epipolar::render_shadow_map(&v.bvh, &light, bounds, self.shadow_map as usize);
         let shadow_ms = ms(t0);
         let g = &v.gbuffer;
-        let out = epipolar::render(&g.camera, &g.distance, &light, &shadow, &medium, &self.options());
+        let (out, device, gpu_phases, device_note) = self.render_on_device(id, ctx, g, &light, &shadow, &medium)?;
         let image = epipolar::composite(&g.colour, &out);
         let mut outputs = view::write_image(
             id,
@@ -252,22 +264,73 @@ impl EpipolarShadows {
             svd_residual: s.svd_residual,
             mean_inscatter: [0, 1, 2].map(|c| out.inscatter.data.iter().map(|p| f64::from(p[c])).sum::<f64>() / n),
             reference,
+            device: device.to_string(),
+            gpu_phases,
+            device_note,
         };
         outputs.push(view::write_json(id, &dir.join("summary.json"), &summary)?);
         let check = summary.reference.as_ref().map_or(String::new(), |r| {
             format!("; vs {}-step BVH marcher: error {:.2} %, {:.0}× faster", r.steps, 100.0 * r.rel_rmse, r.speedup)
         });
+        let note = summary.device_note.as_ref().map_or(String::new(), |n| format!(" ({n})"));
         Ok(StageOutcome {
             outputs,
             summary: format!(
-                "{}×{}, {} slices, epipolar {:.0} ms{check} → {}",
+                "{}×{}, {} slices, epipolar {:.0} ms on {}{note}{check} → {}",
                 image.width,
                 image.height,
                 s.slices,
                 s.total_ms,
+                summary.device,
                 dir.display()
             ),
         })
+    }
+
+    /// The effect on the selected device: [`crate::gpu::epipolar::render`] when the run has a GPU,
+    /// else (or when the device path refuses the input, said in the note) [`epipolar::render`].
+    #[allow(clippy::type_complexity)]
+    fn render_on_device(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+        g: &GBuffer,
+        light: &EpiLight,
+        shadow: &ShadowMap,
+        medium: &EpiMedium,
+    ) -> Result<(EpipolarOutput, &'static str, Vec<GpuPhase>, Option<String>), StageError> {
+        let opts = self.options();
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = ctx.device.gpu() {
+            return match crate::gpu::epipolar::render(gpu, &g.camera, &g.distance, light, shadow, medium, &opts) {
+                Ok((out, times)) => {
+                    let phases = times
+                        .into_iter()
+                        .map(|t| GpuPhase { phase: t.phase, ms: t.seconds * 1e3, passes: t.passes })
+                        .collect();
+                    Ok((out, ctx.device.name(), phases, None))
+                }
+                Err(crate::gpu::GpuError::Limit(why)) => Ok((
+                    epipolar::render(&g.camera, &g.distance, light, shadow, medium, &opts),
+                    "cpu",
+                    Vec::new(),
+                    Some(format!("GPU selected but the CPU path ran: {why}")),
+                )),
+                Err(e) => Err(StageError::Input {
+                    stage: id.into(),
+                    message: format!("GPU epipolar god rays failed: {e}"),
+                    help: "run with --device cpu".into(),
+                }),
+            };
+        }
+        #[cfg(not(feature = "gpu"))]
+        let _ = id;
+        Ok((
+            epipolar::render(&g.camera, &g.distance, light, shadow, medium, &opts),
+            ctx.device.name(),
+            Vec::new(),
+            None,
+        ))
     }
 
     /// `voltab bench --effects`: [`epipolar::bench::bench`] on this stage's scene (1280×960, 1 and 2
