@@ -287,6 +287,62 @@ impl EpipolarShadows {
         })
     }
 
+    /// `voltab bench --gpu`: the stage's frame on the CPU and on `ctx.device` side by side (median of
+    /// 3 each, shadow map excluded: both share it), the GPU time of every phase, and how far the
+    /// device's in-scatter is from the CPU's.
+    pub fn bench_gpu(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<BenchRow>), StageError> {
+        let fields = self.fields();
+        let v = fields.load(id, ctx, None)?;
+        let (light, medium) = Self::light_and_medium(id, &v.scene)?;
+        let bounds = v.scene.bounds().ok_or_else(|| StageError::Input {
+            stage: id.into(),
+            message: format!("{} has no geometry", v.scene.source.display()),
+            help: "add meshes to the scene".into(),
+        })?;
+        let shadow = epipolar::render_shadow_map(&v.bvh, &light, bounds, self.shadow_map as usize);
+        let g = &v.gbuffer;
+        let opts = self.options();
+        let median = |mut x: Vec<f64>| {
+            x.sort_by(f64::total_cmp);
+            x[x.len() / 2]
+        };
+        let cpu: Vec<EpipolarOutput> =
+            (0..3).map(|_| epipolar::render(&g.camera, &g.distance, &light, &shadow, &medium, &opts)).collect();
+        let mut dev = Vec::new();
+        for _ in 0..3 {
+            dev.push(self.render_on_device(id, ctx, g, &light, &shadow, &medium)?);
+        }
+        let cpu_ms = median(cpu.iter().map(|o| o.stats.total_ms).collect());
+        let dev_ms = median(dev.iter().map(|d| d.0.stats.total_ms).collect());
+        let diff = crate::effects::rel_rmse(&dev[0].0.inscatter, &cpu[0].inscatter);
+        let mut text = format!(
+            "Epipolar god rays on {} ({}×{}, {} slices): CPU {cpu_ms:.1} ms, {} {dev_ms:.1} ms ({:.2}×); in-scatter differs by {diff:.2e} (rel. RMS)\n",
+            fields.scene_path(ctx.base_dir).display(),
+            g.camera.width,
+            g.camera.height,
+            cpu[0].stats.slices,
+            dev[0].1,
+            cpu_ms / dev_ms.max(1e-9),
+        );
+        if let Some(note) = &dev[0].3 {
+            text.push_str(&format!("  ({note})\n"));
+        }
+        if !dev[0].2.is_empty() {
+            text.push_str("GPU phases (first frame):\n");
+            for p in &dev[0].2 {
+                text.push_str(&format!("  {:<24} {:>3} passes {:>9.3} ms\n", p.phase, p.passes, p.ms));
+            }
+        }
+        let rows = vec![BenchRow {
+            what: format!("{id}: epipolar frame, CPU vs {}", dev[0].1),
+            baseline_ms: cpu_ms,
+            candidate_ms: dev_ms,
+            speedup: cpu_ms / dev_ms.max(1e-9),
+            note: format!("in-scatter differs by {diff:.2e} (rel. RMS)"),
+        }];
+        Ok((text, rows))
+    }
+
     /// The effect on the selected device: [`crate::gpu::epipolar::render`] when the run has a GPU,
     /// else (or when the device path refuses the input, said in the note) [`epipolar::render`].
     #[allow(clippy::type_complexity)]

@@ -227,6 +227,7 @@ impl StageDef {
     ) -> Result<Option<(String, Vec<crate::bench::BenchRow>)>, StageError> {
         match self {
             StageDef::PopRender(p) => p.bench_gpu(id, ctx).map(Some),
+            StageDef::EpipolarShadows(e) => e.bench_gpu(id, ctx).map(Some),
             _ => Ok(None),
         }
     }
