@@ -32,6 +32,19 @@ fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
 }
 
+/// Relative RMS of the GPU image `gpu` against the CPU image `cpu`, which must not be black.
+fn rel_rms(gpu: &[[f32; 3]], cpu: &[[f32; 3]], what: &str) -> f64 {
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for (a, b) in gpu.iter().zip(cpu) {
+        for k in 0..3 {
+            num += f64::from(a[k] - b[k]).powi(2);
+            den += f64::from(b[k]).powi(2);
+        }
+    }
+    assert!(den > 0.0, "the CPU frame has {what}");
+    (num / den).sqrt()
+}
+
 #[test]
 fn pop_stage_on_the_gpu_matches_the_cpu_and_reports_its_adapter() {
     let d = tempdir();
@@ -58,15 +71,7 @@ fn pop_stage_on_the_gpu_matches_the_cpu_and_reports_its_adapter() {
     let read = |out: &Path| voltab::image_io::read_exr_rgb(&out.join("pop_stage/pop.exr")).unwrap();
     let (ce, ge) = (read(&cpu_out), read(&gpu_out));
     let (cs, gs) = (ce.rgb(Some("scattered")).unwrap(), ge.rgb(Some("scattered")).unwrap());
-    let (mut num, mut den) = (0.0f64, 0.0f64);
-    for (a, b) in gs.iter().zip(&cs) {
-        for k in 0..3 {
-            num += f64::from(a[k] - b[k]).powi(2);
-            den += f64::from(b[k]).powi(2);
-        }
-    }
-    assert!(den > 0.0, "the CPU frame has scattered light");
-    let rel = (num / den).sqrt();
+    let rel = rel_rms(&gs, &cs, "scattered light");
     assert!(rel < 1e-5, "GPU vs CPU scattered light: relative RMS {rel:.2e}");
     // Transmittance does not depend on the propagation at all.
     assert_eq!(ce.rgb(Some("transmittance")).unwrap(), ge.rgb(Some("transmittance")).unwrap());
@@ -110,15 +115,7 @@ fn god_rays_on_the_gpu_match_the_cpu_and_record_their_passes() {
     let read = |out: &Path| voltab::image_io::read_exr_rgb(&out.join("rays/godrays.exr")).unwrap();
     let (ce, ge) = (read(&cpu_out), read(&gpu_out));
     let (cs, gs) = (ce.rgb(Some("inscatter")).unwrap(), ge.rgb(Some("inscatter")).unwrap());
-    let (mut num, mut den) = (0.0f64, 0.0f64);
-    for (a, b) in gs.iter().zip(&cs) {
-        for k in 0..3 {
-            num += f64::from(a[k] - b[k]).powi(2);
-            den += f64::from(b[k]).powi(2);
-        }
-    }
-    assert!(den > 0.0, "the CPU frame has in-scattered light");
-    let rel = (num / den).sqrt();
+    let rel = rel_rms(&gs, &cs, "in-scattered light");
     eprintln!("god rays GPU vs CPU in-scatter: relative RMS {rel:.2e}");
     assert!(rel < 1e-3, "GPU vs CPU in-scatter: relative RMS {rel:.2e}");
 }

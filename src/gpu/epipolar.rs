@@ -420,10 +420,11 @@ fn ms(t: Instant) -> f64 {
 
 #[cfg(test)]
 pub(crate) mod tests {
-    use glam::DVec3;
 
     use super::*;
-    use crate::effects::epipolar::tests::{BOX, all_finite_nonneg, camera, dir_light, empty_bvh, medium, sphere_scene};
+    use crate::effects::epipolar::tests::{
+        BOX, all_finite_nonneg, camera, dir_light, empty_bvh, medium, sphere_scene, spot_light,
+    };
     use crate::effects::epipolar::{march_shadow_map, render_shadow_map};
     use crate::effects::gbuffer::distance_image;
     use crate::effects::{RgbImage, rel_rmse};
@@ -508,15 +509,7 @@ pub(crate) mod tests {
     #[test]
     fn spot_light_matches_the_cpu() {
         let bvh = sphere_scene();
-        let light = EpiLight::Spot {
-            position: [1.0, 6.0, -16.0],
-            direction: DVec3::new(0.2, -1.0, -0.3).normalize().to_array(),
-            inner_cone: 0.5,
-            outer_cone: 0.8,
-            intensity: [300.0, 200.0, 100.0],
-            texture: None,
-        };
-        let case = Case::new(&bvh, camera(80, 60), light, medium(0.06, 0.02, 0.4), 512);
+        let case = Case::new(&bvh, camera(80, 60), spot_light(), medium(0.06, 0.02, 0.4), 512);
         compare("spot", &case, 2e-3);
     }
 

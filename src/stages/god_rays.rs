@@ -345,7 +345,6 @@ impl EpipolarShadows {
 
     /// The effect on the selected device: [`crate::gpu::epipolar::render`] when the run has a GPU,
     /// else (or when the device path refuses the input, said in the note) [`epipolar::render`].
-    #[allow(clippy::type_complexity)]
     fn render_on_device(
         &self,
         id: &str,
@@ -354,30 +353,14 @@ impl EpipolarShadows {
         light: &EpiLight,
         shadow: &ShadowMap,
         medium: &EpiMedium,
-    ) -> Result<(EpipolarOutput, &'static str, Vec<GpuPhase>, Option<String>), StageError> {
+    ) -> Result<super::DeviceRun<EpipolarOutput>, StageError> {
         let opts = self.options();
         #[cfg(feature = "gpu")]
         if let Some(gpu) = ctx.device.gpu() {
-            return match crate::gpu::epipolar::render(gpu, &g.camera, &g.distance, light, shadow, medium, &opts) {
-                Ok((out, times)) => {
-                    let phases = times
-                        .into_iter()
-                        .map(|t| GpuPhase { phase: t.phase, ms: t.seconds * 1e3, passes: t.passes })
-                        .collect();
-                    Ok((out, ctx.device.name(), phases, None))
-                }
-                Err(crate::gpu::GpuError::Limit(why)) => Ok((
-                    epipolar::render(&g.camera, &g.distance, light, shadow, medium, &opts),
-                    "cpu",
-                    Vec::new(),
-                    Some(format!("GPU selected but the CPU path ran: {why}")),
-                )),
-                Err(e) => Err(StageError::Input {
-                    stage: id.into(),
-                    message: format!("GPU epipolar god rays failed: {e}"),
-                    help: "run with --device cpu".into(),
-                }),
-            };
+            let result = crate::gpu::epipolar::render(gpu, &g.camera, &g.distance, light, shadow, medium, &opts);
+            return super::device_run(id, ctx, "epipolar god rays", result, || {
+                epipolar::render(&g.camera, &g.distance, light, shadow, medium, &opts)
+            });
         }
         #[cfg(not(feature = "gpu"))]
         let _ = id;

@@ -293,7 +293,6 @@ impl ImageFogStage {
 
     /// The effect on the selected device: the GPU filter and compose ([`crate::gpu::fog::render`]) when
     /// the run has a GPU, else (or for options the GPU path does not port, said in the note) the CPU.
-    #[allow(clippy::type_complexity)]
     fn render_on_device(
         &self,
         id: &str,
@@ -301,29 +300,13 @@ impl ImageFogStage {
         g: &GBuffer,
         medium: &FogMedium,
         opts: &FogOptions,
-    ) -> Result<(image_fog::FogOutput, &'static str, Vec<GpuPhase>, Option<String>), StageError> {
+    ) -> Result<super::DeviceRun<image_fog::FogOutput>, StageError> {
         #[cfg(feature = "gpu")]
         if let Some(gpu) = ctx.device.gpu() {
-            return match crate::gpu::fog::render(gpu, &g.camera, &g.colour, &g.distance, medium, opts) {
-                Ok((out, times)) => {
-                    let phases = times
-                        .into_iter()
-                        .map(|t| GpuPhase { phase: t.phase, ms: t.seconds * 1e3, passes: t.passes })
-                        .collect();
-                    Ok((out, ctx.device.name(), phases, None))
-                }
-                Err(crate::gpu::GpuError::Limit(why)) => Ok((
-                    image_fog::render(&g.camera, &g.colour, &g.distance, medium, opts),
-                    "cpu",
-                    Vec::new(),
-                    Some(format!("GPU selected but the CPU path ran: {why}")),
-                )),
-                Err(e) => Err(StageError::Input {
-                    stage: id.into(),
-                    message: format!("GPU image fog failed: {e}"),
-                    help: "run with --device cpu".into(),
-                }),
-            };
+            let result = crate::gpu::fog::render(gpu, &g.camera, &g.colour, &g.distance, medium, opts);
+            return super::device_run(id, ctx, "image fog", result, || {
+                image_fog::render(&g.camera, &g.colour, &g.distance, medium, opts)
+            });
         }
         #[cfg(not(feature = "gpu"))]
         let _ = id;

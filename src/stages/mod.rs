@@ -250,6 +250,40 @@ impl StageDef {
     }
 }
 
+/// What an effect stage's frame ran on: the output, the device's name, the GPU time per phase, and
+/// why the CPU ran although a GPU was selected.
+pub(crate) type DeviceRun<T> = (T, &'static str, Vec<image_fog::GpuPhase>, Option<String>);
+
+/// An effect's GPU `result` as a [`DeviceRun`]: its phases on success; on a device limit (an input
+/// the GPU path refuses) the CPU frame from `cpu`, with the limit in the note; any other device error
+/// as a stage error naming `effect`.
+#[cfg(feature = "gpu")]
+pub(crate) fn device_run<T>(
+    id: &str,
+    ctx: &StageContext,
+    effect: &str,
+    result: Result<(T, Vec<crate::gpu::PassTime>), crate::gpu::GpuError>,
+    cpu: impl FnOnce() -> T,
+) -> Result<DeviceRun<T>, StageError> {
+    match result {
+        Ok((out, times)) => {
+            let phases = times
+                .into_iter()
+                .map(|t| image_fog::GpuPhase { phase: t.phase, ms: t.seconds * 1e3, passes: t.passes })
+                .collect();
+            Ok((out, ctx.device.name(), phases, None))
+        }
+        Err(crate::gpu::GpuError::Limit(why)) => {
+            Ok((cpu(), "cpu", Vec::new(), Some(format!("GPU selected but the CPU path ran: {why}"))))
+        }
+        Err(e) => Err(StageError::Input {
+            stage: id.into(),
+            message: format!("GPU {effect} failed: {e}"),
+            help: "run with --device cpu".into(),
+        }),
+    }
+}
+
 /// Checks an output file name: a plain name (no folders) with the given extension.
 pub fn check_output_name(field: &'static str, name: &str, ext: &str) -> Option<FieldIssue> {
     let ok = name.is_empty()

@@ -23,6 +23,18 @@ pub(crate) fn dir_light(t_toward: [f64; 3]) -> EpiLight {
     EpiLight::Directional { direction: l.to_array(), irradiance: [2.0, 3.0, 4.0], texture: None }
 }
 
+/// A spot light above the sphere scene, pointing away from the eye (the camera is outside the cone).
+pub(crate) fn spot_light() -> EpiLight {
+    EpiLight::Spot {
+        position: [1.0, 6.0, -16.0],
+        direction: DVec3::new(0.2, -1.0, -0.3).normalize().to_array(),
+        inner_cone: 0.5,
+        outer_cone: 0.8,
+        intensity: [300.0, 200.0, 100.0],
+        texture: None,
+    }
+}
+
 fn quad(name: &str, y: f32, x0: f32, x1: f32, z0: f32, z1: f32) -> crate::scene::Mesh {
     procedural::mesh(
         name,
@@ -299,15 +311,7 @@ fn spot_light_agrees_with_the_marcher() {
     let cam = camera(80, 60);
     let depth = distance_image(&bvh, &cam);
     let m = medium(0.06, 0.02, 0.4);
-    let light = EpiLight::Spot {
-        position: [1.0, 6.0, -16.0],
-        // Pointing away from the eye: the camera is outside the cone.
-        direction: DVec3::new(0.2, -1.0, -0.3).normalize().to_array(),
-        inner_cone: 0.5,
-        outer_cone: 0.8,
-        intensity: [300.0, 200.0, 100.0],
-        texture: None,
-    };
+    let light = spot_light();
     let shadow = render_shadow_map(&bvh, &light, BOX, 512);
     let sm = march_shadow_map(&cam, &depth, &light, &shadow, &m, 2048);
     let out = render(&cam, &depth, &light, &shadow, &m, &EpipolarOptions::default());
