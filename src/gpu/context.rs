@@ -427,20 +427,18 @@ impl Gpu {
         encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
         self.queue.submit([encoder.finish()]);
         let slice = staging.slice(..);
-        let status = Arc::new(Mutex::new(None));
-        let s = status.clone();
+        let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
-            if let Ok(mut v) = s.lock() {
-                *v = Some(r);
-            }
+            let _ = tx.send(r);
         });
         self.wait(during)?;
         self.check(during)?;
-        let mapped = status.lock().map(|mut v| v.take()).unwrap_or(None);
-        match mapped {
-            Some(Ok(())) => {}
-            Some(Err(e)) => return Err(GpuError::Runtime { during: during.to_string(), message: e.to_string() }),
-            None => {
+        // When several threads share the device (the test harness), another thread's poll may be
+        // the one that runs this callback, after this thread's poll has returned: wait for it.
+        match rx.recv_timeout(std::time::Duration::from_secs(120)) {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(GpuError::Runtime { during: during.to_string(), message: e.to_string() }),
+            Err(_) => {
                 return Err(GpuError::Runtime {
                     during: during.to_string(),
                     message: "the buffer was never mapped".into(),
