@@ -13,14 +13,18 @@
 //!
 //! **Integration, and how it differs from the paper's sweep.** The CPU (and the paper) sweep each
 //! slice's `β` samples in order in one thread, updating a Fenwick tree as depth modes are passed:
-//! `O(log bins)` per sample. On the device every (sample, lane) thread sums its slice's visible
-//! leaves directly, `O(bins)` per sample but with no sequential dependency, so the work spreads over
-//! samples × lanes threads instead of one thread per slice. The leaves are the same integers the
-//! CPU's tree holds and integer sums are exact in any order, so both give the same partial sums up to
-//! the f32 rounding of the leaves. A second reason: lavapipe (Mesa 22.3, the CI's device) silently
-//! ends a loop nest after 65 535 iterations in total, which a per-slice sweep exceeds by far; every
-//! pass here keeps each thread's loops below that (measured: a sweep lost the lanes past the first
-//! few on 12-lane slices).
+//! `O(log bins)` per sample, but one long sequential loop per slice. The device cuts each slice's
+//! samples into blocks of about √S ([`integration_blocks`]): one pass evaluates every bin's visible
+//! leaf at each block's first sample and prefix-sums it, and lists the bins with a depth mode inside
+//! the block; each (sample, lane) thread then takes its block's prefix sum at its `γ_end` bin and
+//! subtracts what the listed bins below it lose between the block's start and its own `β`. Work per
+//! lane is `O(S/T·bins + S·modes·T/S)` for blocks of `T` (balanced near `T = √S`), with no thread
+//! depending on another. The leaves are the same integers the CPU's tree holds and integer sums are
+//! exact in any order, so both give the same partial sums up to the f32 rounding of the leaves, and
+//! every block size gives the same bits (a test). A second reason: lavapipe (Mesa 22.3, the CI's
+//! device) silently ends a loop nest after 65 535 iterations in total, which a per-slice sweep
+//! exceeds by far; every pass here keeps each thread's loops below that (measured: a sweep lost the
+//! lanes past the first few on 12-lane slices).
 //!
 //! **Split.** The CPU lays out the slices ([`Setup::layout`], Sec. 8: a few hundred directions from
 //! the epipole's position) and factorises the kernel by SVD ([`Factorization::from_extent`]: a
@@ -50,6 +54,14 @@ use crate::effects::epipolar::{
 use crate::effects::{DistanceImage, Image, ViewCamera};
 use crate::physics::rng::StreamKey;
 
+/// β samples per integration block and blocks per slice for slices of at most `max_beta` samples:
+/// blocks of about √`max_beta` samples (at least 16) balance `epi_integrate.wgsl`'s two costs, the
+/// per-block prefix sums over every bin and the per-sample walk over the block's changed bins.
+fn integration_blocks(max_beta: u32) -> [u32; 2] {
+    let block = (f64::from(max_beta).sqrt().ceil() as u32).max(16);
+    [block, max_beta.div_ceil(block).max(1)]
+}
+
 /// Scratch the slice chunks may use in all \[bytes\].
 const CHUNK_BUDGET: u64 = 192 << 20;
 
@@ -71,6 +83,8 @@ struct Frame {
     plain: u32,
     key: u64,
     max_beta: u32,
+    /// β samples per integration block, and blocks per slice (`epi_integrate.wgsl`).
+    block: [u32; 2],
 }
 
 impl Frame {
@@ -81,7 +95,7 @@ impl Frame {
         }
         w = w.u(self.tex_size[0]).u(self.tex_size[1]).u(first).u(self.samples);
         w = w.u(count).u(self.plain).u(self.key as u32).u((self.key >> 32) as u32);
-        w = w.u(self.max_beta).pad();
+        w = w.u(self.max_beta).u(self.block[0]).u(self.block[1]).pad();
         gpu.uniform(label, &w.0)
     }
 }
@@ -165,10 +179,11 @@ pub fn render(
     medium: &EpiMedium,
     opts: &EpipolarOptions,
 ) -> Result<(EpipolarOutput, Vec<PassTime>), GpuError> {
-    render_chunked(gpu, cam, depth, light, shadow, medium, opts, CHUNK_BUDGET)
+    render_chunked(gpu, cam, depth, light, shadow, medium, opts, CHUNK_BUDGET, None)
 }
 
-/// [`render`] with at most `budget` bytes of per-chunk scratch (at least one slice per chunk).
+/// [`render`] with at most `budget` bytes of per-chunk scratch (at least one slice per chunk) and,
+/// when given, `block` β samples per integration block instead of [`integration_blocks`]' choice.
 #[allow(clippy::too_many_arguments)]
 fn render_chunked(
     gpu: &Gpu,
@@ -179,6 +194,7 @@ fn render_chunked(
     medium: &EpiMedium,
     opts: &EpipolarOptions,
     budget: u64,
+    block: Option<u32>,
 ) -> Result<(EpipolarOutput, Vec<PassTime>), GpuError> {
     let start = Instant::now();
     let mut stats = EpipolarStats::default();
@@ -255,6 +271,10 @@ fn render_chunked(
         plain,
         key,
         max_beta,
+        block: match block {
+            Some(b) => [b.max(1), max_beta.div_ceil(b.max(1)).max(1)],
+            None => integration_blocks(max_beta),
+        },
     };
     let rectify = gpu.kernel(&shaders::EPI_RECTIFY, "main")?;
     let p0 = frame.uniform(gpu, "epi rectify params", 0, 0);
@@ -296,8 +316,18 @@ fn render_chunked(
     // 3. Chunks of slices: prefilter, quantise, integrate.
     let lanes = (ch * rank) as u64;
     let bins64 = bins as u64;
-    // Per slice: events, modulation, leaves, scales, per-lane sample sums [bytes].
-    let per_slice = [bins64 * 16, bins64 * 16, bins64 * lanes * 4, lanes * 4, u64::from(max_beta) * lanes * 4];
+    // Per slice: events, modulation, leaf prefix sums, scales, per-lane sample sums, and per block
+    // the prefix sums at its start and its bins with a depth mode [bytes].
+    let nblk = u64::from(frame.block[1]);
+    let per_slice = [
+        bins64 * 16,
+        bins64 * 16,
+        bins64 * lanes * 4,
+        lanes * 4,
+        u64::from(max_beta) * lanes * 4,
+        nblk * bins64 * lanes * 4,
+        nblk * (bins64 + 1) * 4,
+    ];
     let largest = per_slice.iter().copied().max().unwrap_or(1).max(1);
     if largest > gpu.max_binding() {
         return Err(GpuError::Limit(format!(
@@ -310,12 +340,15 @@ fn render_chunked(
     let c64 = chunk as u64;
     let events_buf = gpu.buffer_zeroed("epi events", c64 * per_slice[0])?;
     let modul_buf = gpu.buffer_zeroed("epi modulation", c64 * per_slice[1])?;
-    let leaf_buf = gpu.buffer_zeroed("epi leaves", c64 * per_slice[2])?;
+    let cum_buf = gpu.buffer_zeroed("epi leaf prefix sums", c64 * per_slice[2])?;
     let scales_buf = gpu.buffer_zeroed("epi lane scales", c64 * per_slice[3])?;
     let lsum_buf = gpu.buffer_zeroed("epi lane sums", c64 * per_slice[4])?;
+    let base_buf = gpu.buffer_zeroed("epi block prefix sums", c64 * per_slice[5])?;
+    let listed_buf = gpu.buffer_zeroed("epi block bins with a depth mode", c64 * per_slice[6])?;
     let values_buf = gpu.buffer_zeroed("epi values", u64::from(samples) * 16)?;
     let prefilter = gpu.kernel(&shaders::EPI_PREFILTER, "main")?;
     let quantise = gpu.kernel(&shaders::EPI_QUANTISE, "main")?;
+    let bases = gpu.kernel(&shaders::EPI_INTEGRATE, "bases")?;
     let sums = gpu.kernel(&shaders::EPI_INTEGRATE, "sums")?;
     let combine = gpu.kernel(&shaders::EPI_INTEGRATE, "combine")?;
     let unrectify = gpu.kernel(&shaders::EPI_UNRECTIFY, "main")?;
@@ -342,7 +375,19 @@ fn render_chunked(
         );
         let quant = gpu.bind_at(
             &quantise,
-            &[(0, p), (7, &nbins_buf), (9, &modul_buf), (10, &gfn_buf), (12, &scales_buf), (13, &leaf_buf)],
+            &[(0, p), (7, &nbins_buf), (9, &modul_buf), (10, &gfn_buf), (12, &scales_buf), (13, &cum_buf)],
+        );
+        let base = gpu.bind_at(
+            &bases,
+            &[
+                (0, p),
+                (4, &offs_buf),
+                (7, &nbins_buf),
+                (8, &events_buf),
+                (13, &cum_buf),
+                (15, &listed_buf),
+                (17, &base_buf),
+            ],
         );
         let sum = gpu.bind_at(
             &sums,
@@ -352,16 +397,25 @@ fn render_chunked(
                 (6, &gend_buf),
                 (7, &nbins_buf),
                 (8, &events_buf),
-                (12, &scales_buf),
-                (13, &leaf_buf),
+                (13, &cum_buf),
                 (14, &lsum_buf),
+                (15, &listed_buf),
+                (17, &base_buf),
             ],
         );
         let comb = gpu.bind_at(
             &combine,
-            &[(0, p), (4, &offs_buf), (5, &betas_buf), (11, &bnode_buf), (14, &lsum_buf), (16, &values_buf)],
+            &[
+                (0, p),
+                (4, &offs_buf),
+                (5, &betas_buf),
+                (11, &bnode_buf),
+                (12, &scales_buf),
+                (14, &lsum_buf),
+                (16, &values_buf),
+            ],
         );
-        binds.push((pre, quant, sum, comb, *count as u32));
+        binds.push((pre, quant, base, sum, comb, *count as u32));
     }
 
     // 4. Unrectification with the ring march.
@@ -389,11 +443,17 @@ fn render_chunked(
     );
     let mut passes = Vec::new();
     let lanes32 = lanes as u32;
-    for (pre, quant, sum, comb, count) in &binds {
+    for (pre, quant, base, sum, comb, count) in &binds {
         passes.push(Pass { phase: "prefilter", kernel: &prefilter, bind: pre, items: count * bins as u32 });
-        passes.push(Pass { phase: "integrate", kernel: &quantise, bind: quant, items: count * lanes32 });
-        passes.push(Pass { phase: "integrate", kernel: &sums, bind: sum, items: count * max_beta * lanes32 });
-        passes.push(Pass { phase: "integrate", kernel: &combine, bind: comb, items: count * max_beta });
+        passes.push(Pass { phase: "integrate: quantise", kernel: &quantise, bind: quant, items: count * lanes32 });
+        passes.push(Pass {
+            phase: "integrate: block bases",
+            kernel: &bases,
+            bind: base,
+            items: count * frame.block[1] * lanes32,
+        });
+        passes.push(Pass { phase: "integrate: sums", kernel: &sums, bind: sum, items: count * max_beta * lanes32 });
+        passes.push(Pass { phase: "integrate: combine", kernel: &combine, bind: comb, items: count * max_beta });
     }
     passes.push(Pass { phase: "unrectify", kernel: &unrectify, bind: &ubind, items: pixels });
     times.extend(gpu.run(&passes)?);
@@ -401,7 +461,14 @@ fn render_chunked(
     let transmittance: Vec<[f32; 4]> = gpu.read(&trans_buf, pixels as usize)?;
     let counts: Vec<u32> = gpu.read(&counts_buf, 2)?;
 
-    let phase_ms = |name: &str| times.iter().filter(|t| t.phase == name).map(|t| t.seconds * 1e3).sum::<f64>();
+    // A phase and its sub-passes ("integrate: sums").
+    let phase_ms = |name: &str| {
+        times
+            .iter()
+            .filter(|t| t.phase.strip_prefix(name).is_some_and(|rest| rest.is_empty() || rest.starts_with(':')))
+            .map(|t| t.seconds * 1e3)
+            .sum::<f64>()
+    };
     stats.rectify_ms = layout_ms + phase_ms("rectify");
     stats.prefilter_ms = phase_ms("prefilter");
     stats.integrate_ms = phase_ms("integrate");
@@ -448,6 +515,20 @@ pub(crate) mod tests {
         }
         pub(crate) fn cpu(&self) -> EpipolarOutput {
             epipolar::render(&self.cam, &self.depth, &self.light, &self.shadow, &self.medium, &self.opts)
+        }
+        pub(crate) fn gpu_tuned(&self, budget: u64, block: Option<u32>) -> (EpipolarOutput, Vec<PassTime>) {
+            render_chunked(
+                test_gpu(),
+                &self.cam,
+                &self.depth,
+                &self.light,
+                &self.shadow,
+                &self.medium,
+                &self.opts,
+                budget,
+                block,
+            )
+            .unwrap()
         }
         pub(crate) fn gpu(&self) -> EpipolarOutput {
             render(test_gpu(), &self.cam, &self.depth, &self.light, &self.shadow, &self.medium, &self.opts)
@@ -566,24 +647,26 @@ pub(crate) mod tests {
     fn chunked_integration_equals_one_chunk() {
         let bvh = sphere_scene();
         let case = Case::new(&bvh, camera(64, 48), dir_light([0.15, 0.1, -1.0]), medium(0.06, 0.01, 0.6), 256);
-        let run = |budget| {
-            render_chunked(
-                test_gpu(),
-                &case.cam,
-                &case.depth,
-                &case.light,
-                &case.shadow,
-                &case.medium,
-                &case.opts,
-                budget,
-            )
-            .unwrap()
-        };
-        let (one, _) = run(CHUNK_BUDGET);
-        // About seven slices per chunk.
-        let (many, times) = run(7 * 200_000);
-        assert!(times.iter().any(|t| t.phase == "integrate" && t.passes > 10), "{times:?}");
+        let (one, _) = case.gpu_tuned(CHUNK_BUDGET, None);
+        // A few slices per chunk.
+        let (many, times) = case.gpu_tuned(7 * 200_000, None);
+        assert!(times.iter().any(|t| t.phase == "integrate: sums" && t.passes > 10), "{times:?}");
         assert!(one.inscatter == many.inscatter && one.transmittance == many.transmittance);
+    }
+
+    /// The integration blocks only regroup exact integer sums, so every block size gives the same
+    /// bits: one sample per block (every sample from its own base), the default √S, and one block
+    /// per slice (every sample walks the slice's whole list of changed bins). The spheres' shadows put
+    /// depth modes inside the slices, so the blocks have something to regroup.
+    #[test]
+    fn every_integration_block_size_gives_the_same_bits() {
+        let bvh = sphere_scene();
+        let case = Case::new(&bvh, camera(64, 48), dir_light([0.15, 0.1, -1.0]), medium(0.06, 0.01, 0.6), 256);
+        let (default, _) = case.gpu_tuned(CHUNK_BUDGET, None);
+        for block in [1, 7, 100_000] {
+            let (other, _) = case.gpu_tuned(CHUNK_BUDGET, Some(block));
+            assert!(other.inscatter == default.inscatter, "block {block}");
+        }
     }
 
     #[test]

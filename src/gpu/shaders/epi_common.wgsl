@@ -34,7 +34,7 @@ struct EpiParams {
     n1: vec4<u32>,        // x sub-samples per bin (1 or 4), y max depth modes, z ring steps, w channels in the tree
     n2: vec4<u32>,        // x texture width, y texture height, z first slice of this chunk, w β samples in all
     n3: vec4<u32>,        // x slices in this chunk, y 1 when untextured directional, z jitter key lo, w jitter key hi
-    n4: vec4<u32>,        // x most β samples in one slice, yzw 0
+    n4: vec4<u32>,        // x most β samples in one slice, y β samples per integration block, z blocks per slice, w 0
 }
 
 @group(0) @binding(0) var<uniform> P: EpiParams;

@@ -8,18 +8,22 @@
 // that the slice's n bins sum below 2^30 in magnitude; integer sums are then exact and associative,
 // so any summation order gives the same bits, and a fully removed bin is exactly 0.
 //
+// Stored are the lane's inclusive prefix sums of the leaves, the partial sums with nothing removed
+// (leaf j = cum[j] − cum[j − 1]).
+//
 // Bindings (group 0), besides epi_common's P (0):
 //   7  nbins   storage  array<u32> [slices]          read: γ bins the slice uses
 //   9  modul   storage  array<vec4<f32>> [chunk·bins] read: modulation (pass 2)
 //  10  gfn     storage  array<f32> [kernels·rank·bins] read: Γ_i(γ_j), (k·rank + i)·bins + j
 //  12  scales  storage  array<f32> [chunk·lanes]     write: the lane's scale
-//  13  leaf    storage  array<i32> [chunk·bins·lanes] write: the quantised leaves, (local·bins + j)·lanes + l
+//  13  cum     storage  array<i32> [chunk·bins·lanes] write: the leaves' inclusive prefix sums,
+//                                                    (local·bins + j)·lanes + l
 
 @group(0) @binding(7) var<storage, read> nbins: array<u32>;
 @group(0) @binding(9) var<storage, read> modul: array<vec4<f32>>;
 @group(0) @binding(10) var<storage, read> gfn: array<f32>;
 @group(0) @binding(12) var<storage, read_write> scales: array<f32>;
-@group(0) @binding(13) var<storage, read_write> leaf: array<i32>;
+@group(0) @binding(13) var<storage, read_write> cum: array<i32>;
 
 // Γ_i(γ_j)·M_j·Δγ for lane l of bin j of the chunk's slice `local` (0 when not finite).
 fn lane_value(local: u32, j: u32, l: u32) -> f32 {
@@ -62,10 +66,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         sc = exp2(floor(log2(1073741824.0 / f32(nb) / mx)));
     }
     scales[local * lanes + l] = sc;
+    var acc = 0;
     for (var j = 0u; j < mid; j++) {
-        leaf[(local * bins + j) * lanes + l] = i32(lane_value(local, j, l) * sc);
+        acc += i32(lane_value(local, j, l) * sc);
+        cum[(local * bins + j) * lanes + l] = acc;
     }
     for (var j = mid; j < nb; j++) {
-        leaf[(local * bins + j) * lanes + l] = i32(lane_value(local, j, l) * sc);
+        acc += i32(lane_value(local, j, l) * sc);
+        cum[(local * bins + j) * lanes + l] = acc;
     }
 }
