@@ -10,7 +10,7 @@
 //! | [`context`] | adapter and device, buffers, chunked dispatch, timing, error capture | — |
 //! | [`shaders`] | the `.wgsl` sources under `src/gpu/shaders/`, validated by naga | — |
 //! | [`epipolar`] | god rays: depth rectification, shadow-map depth modes, per-slice Fenwick sweep (one thread per slice), unrectification with the ring march; slice layout and SVD on the CPU | baran2010 Secs. 3–9 |
-//! | [`fog`] | image-space fog: MIP chain (masked 4-tap, colour + spread chains), level selection and B-spline fetch, compose; integrals on the CPU | iser2018 Secs. 4.2–4.4 |
+//! | [`fog`] | image-space fog: per-pixel density integrals, `L_at`, `L_sc` and spread; MIP chain (masked 4-tap, colour + spread chains), level selection and B-spline fetch, compose | iser2018 Secs. 3.3, 4.1–4.4 |
 //! | [`pop`] | POP gathering iteration (Eqs. 2–6) and accumulation toward the eye (Eqs. 7–8) | elek2014 Secs. 4.2–4.3, 5.4 |
 //!
 //! The CPU implementations in [`crate::effects`] are the ground truth: every GPU pass has a test

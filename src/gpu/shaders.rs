@@ -28,6 +28,9 @@ pub const POP_ACCUMULATE: Shader =
 /// Image fog: one masked 4-tap MIP level of the colour and spread chains (iser2018 Secs. 4.2-4.3).
 pub const FOG_DOWNSAMPLE: Shader =
     Shader { name: "fog_downsample.wgsl", source: include_str!("shaders/fog_downsample.wgsl") };
+/// Image fog: per-pixel density integrals, `L_at`, `L_sc` and spread into MIP level 0 (Secs. 3.3, 4.1).
+pub const FOG_INTEGRALS: Shader =
+    Shader { name: "fog_integrals.wgsl", source: include_str!("shaders/fog_integrals.wgsl") };
 /// Image fog: per-pixel level selection and B-spline/linear reconstruction (Secs. 4.2-4.3).
 pub const FOG_FETCH: Shader = Shader { name: "fog_fetch.wgsl", source: include_str!("shaders/fog_fetch.wgsl") };
 /// Image fog: compose L' = L_at + L'_sc (Sec. 4.4).
@@ -67,6 +70,7 @@ pub const ALL: &[Shader] = &[
     POP_STEP,
     POP_ENERGY,
     POP_ACCUMULATE,
+    FOG_INTEGRALS,
     FOG_DOWNSAMPLE,
     FOG_FETCH,
     FOG_COMPOSE,

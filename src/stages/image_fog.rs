@@ -132,7 +132,7 @@ pub struct FogSummary {
     pub gather: Option<GatherCheck>,
     /// Effect against path tracing.
     pub physics: Option<PhysicsCheck>,
-    /// Where the filter and compose ran: `"cpu"` or `"gpu"` (the integrals always run on the CPU).
+    /// Where the effect ran: `"cpu"` or `"gpu"` (integrals, filter and compose alike).
     #[serde(default)]
     pub device: String,
     /// GPU time per phase (`mip chain`, `fetch`, `compose`) when they ran on the GPU.
