@@ -98,6 +98,14 @@ fn clip(min: DVec3, max: DVec3, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
     (exit > enter).then_some((enter, exit))
 }
 
+/// A source of light scattered toward the eye that the ray marcher evaluates per step instead of reading
+/// it from a grid (a point light's single scattering, whose `1/r²` no grid resolves).
+pub trait StepSource: Sync {
+    /// The mean over the step from `a` to `b` (the eye lies behind `a`) of the radiance scattered toward
+    /// the eye per unit `σ_s` \[W/(m² sr) per 1/m\].
+    fn step_average(&self, a: DVec3, b: DVec3) -> Rgb;
+}
+
 /// Ray-marches every pixel. `surface_distance` (per pixel, `INFINITY` when the ray escapes) stops the
 /// march at the first surface.
 pub fn march(
@@ -107,6 +115,19 @@ pub fn march(
     camera: &ViewCamera,
     surface_distance: Option<&[f64]>,
     opts: &MarchOptions,
+) -> Frame {
+    march_with(grid, toward_eye, medium, camera, surface_distance, opts, &[])
+}
+
+/// [`march`] with extra per-step sources added to the upsampled grid value.
+pub fn march_with(
+    grid: &Grid,
+    toward_eye: &[Rgb],
+    medium: &VoxelMedium,
+    camera: &ViewCamera,
+    surface_distance: Option<&[f64]>,
+    opts: &MarchOptions,
+    sources: &[&dyn StepSource],
 ) -> Frame {
     // Steps resolve the finer of voxels and cells; a uniform density has no voxel detail to resolve.
     let cell = grid.size.iter().copied().fold(f64::INFINITY, f64::min);
@@ -137,7 +158,17 @@ pub fn march(
                 if rho <= 0.0 {
                     continue;
                 }
-                let j = upsample(grid, toward_eye, medium, p, inv_range);
+                let mut j = upsample(grid, toward_eye, medium, p, inv_range);
+                if !sources.is_empty() {
+                    let a = camera.position + dir * (t0 + s as f64 * dt);
+                    let b = camera.position + dir * (t0 + (s + 1) as f64 * dt);
+                    for src in sources {
+                        let e = src.step_average(a, b);
+                        for c in 0..3 {
+                            j[c] += e[c];
+                        }
+                    }
+                }
                 for c in 0..3 {
                     let ss = rho * medium.sigma_s[c];
                     let st = ss + rho * medium.sigma_a[c];
