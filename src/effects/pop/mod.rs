@@ -30,3 +30,5 @@ pub mod scene;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_radial;

@@ -101,9 +101,10 @@ fn clip(min: DVec3, max: DVec3, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
 /// A source of light scattered toward the eye that the ray marcher evaluates per step instead of reading
 /// it from a grid (a point light's single scattering, whose `1/r²` no grid resolves).
 pub trait StepSource: Sync {
-    /// The mean over the step from `a` to `b` (the eye lies behind `a`) of the radiance scattered toward
-    /// the eye per unit `σ_s` \[W/(m² sr) per 1/m\].
-    fn step_average(&self, a: DVec3, b: DVec3) -> Rgb;
+    /// Over the step from `a` to `b` (the eye lies behind `a`), `∫ J(s) e^{−σ_t s} ds` per channel: the
+    /// radiance `J` scattered toward the eye per unit `σ_s` \[W/(m² sr) per 1/m\], weighted by the
+    /// transmittance from `a` with the step's extinction `sigma_t` \[1/m\].
+    fn step_integral(&self, a: DVec3, b: DVec3, sigma_t: Rgb) -> Rgb;
 }
 
 /// Ray-marches every pixel. `surface_distance` (per pixel, `INFINITY` when the ray escapes) stops the
@@ -158,14 +159,16 @@ pub fn march_with(
                 if rho <= 0.0 {
                     continue;
                 }
-                let mut j = upsample(grid, toward_eye, medium, p, inv_range);
+                let j = upsample(grid, toward_eye, medium, p, inv_range);
+                let mut extra = [0.0; 3];
                 if !sources.is_empty() {
                     let a = camera.position + dir * (t0 + s as f64 * dt);
                     let b = camera.position + dir * (t0 + (s + 1) as f64 * dt);
+                    let sigma_t = [0, 1, 2].map(|c| rho * (medium.sigma_s[c] + medium.sigma_a[c]));
                     for src in sources {
-                        let e = src.step_average(a, b);
+                        let e = src.step_integral(a, b, sigma_t);
                         for c in 0..3 {
-                            j[c] += e[c];
+                            extra[c] += e[c];
                         }
                     }
                 }
@@ -177,7 +180,7 @@ pub fn march_with(
                     }
                     // ∫ T σ_s J over the step for constant coefficients, without cancellation.
                     let absorbed = -(-st * dt).exp_m1();
-                    radiance[c] += trans[c] * absorbed * (ss / st) * j[c];
+                    radiance[c] += trans[c] * (absorbed * (ss / st) * j[c] + ss * extra[c]);
                     trans[c] *= 1.0 - absorbed;
                 }
             }
