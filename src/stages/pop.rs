@@ -461,6 +461,16 @@ impl PopRender {
         if !(4..=1024).contains(&self.fig12_size) {
             issue("fig12_size", format!("fig12_size = {}", self.fig12_size), "use 4 to 1024");
         }
+        if self.reference_samples > 100_000 {
+            issue(
+                "reference_samples",
+                format!("reference_samples = {}", self.reference_samples),
+                "use 0 (no comparison) to 100000",
+            );
+        }
+        if !(4..=1024).contains(&self.reference_width) {
+            issue("reference_width", format!("reference_width = {}", self.reference_width), "use 4 to 1024");
+        }
         if !(1..=100_000).contains(&self.fig12_samples) {
             issue("fig12_samples", format!("fig12_samples = {}", self.fig12_samples), "use 1 to 100000");
         }
