@@ -887,19 +887,21 @@ impl PopRender {
         let init = median(&sum(|l| l.phases_ms.initialisation));
         let prop = median(&sum(|l| l.phases_ms.propagation));
         let res = median(&sum(|l| l.phases_ms.residuum));
+        let merge_ms = median(&sum(|l| l.merge_ms));
         let march = median(&|f: &PopFrame| f.march_ms);
         let l = &runs[0].lights;
         let iters: usize = l.iter().map(|r| r.anisotropic_iterations).sum();
         let iso: usize = l.iter().map(|r| r.isotropic_iterations).sum();
         let (w, h) = (v.gbuffer.camera.width, v.gbuffer.camera.height);
         let mut text = format!(
-            "{id}: elek2014 POP, preset grid {:?}, {}×{}, {} threads (median of 5)\n\n| phase (Fig. 14) | ms |\n|---|---:|\n| importance, ordinates | not implemented (directional lights only) |\n| grid + medium downsampling | {grid_ms:.2} |\n| initialisation | {init:.2} |\n| propagation ({iters} iterations, {:.3} ms each) | {prop:.2} |\n| residuum ({iso} iterations) | {res:.2} |\n| merge/upsample + ray march | {march:.1} |\n| frame | {:.1} |\n",
+            "{id}: elek2014 POP, preset grid {:?}, {}×{}, {} threads (median of 5)\n\n| phase (Fig. 14) | ms |\n|---|---:|\n| importance, ordinates | not implemented (directional and point lights only) |\n| lights | {} |\n| grid + medium downsampling | {grid_ms:.2} |\n| initialisation (point lights: depth map + radial sweep) | {init:.2} |\n| propagation ({iters} iterations, {:.3} ms each) | {prop:.2} |\n| residuum ({iso} iterations) | {res:.2} |\n| merge radial grids into the render grid | {merge_ms:.2} |\n| upsample + ray march | {march:.1} |\n| frame | {:.1} |\n",
             table.def.grid,
             w,
             h,
             rayon::current_num_threads(),
+            l.iter().map(|r| format!("{} ({})", r.light, r.kind)).collect::<Vec<_>>().join(", "),
             prop / iters.max(1) as f64,
-            grid_ms + init + prop + res + march
+            grid_ms + init + prop + res + merge_ms + march
         );
         // The residuum on a thick, nearly conservative cube.
         let n = table.def.grid.map(|v| v as usize);

@@ -356,3 +356,62 @@ impl RadialGrid {
         out
     }
 }
+
+/// `voltab stability` rows of the radial-grid formulas: shell radii, centroid radius, `Δr/V`, the
+/// octahedral map at the poles and axes, and the exact `∫ ds/r²` of a step through the light.
+pub fn stability_rows() -> Vec<crate::stability::Row> {
+    use crate::stability::{Expect, Row};
+    let row = |formula, input: String, value, expect| Row { kind: "PopRadial", formula, input, value, expect };
+    let mut v = Vec::new();
+    for (n, s, near, far) in
+        [(16, 16, 0.0, 4.7), (2, 256, 0.0, 1e-9), (256, 256, 0.0, 1e9), (1, 1, 0.0, 1.0), (16, 16, 5.0, 5.0 + 1e-12)]
+    {
+        let r = shell_radii(n, s, near, far);
+        let ok = r.len() == s + 1 && r[0] == 0.0 && r.windows(2).all(|w| w[1] > w[0] && w[1].is_finite());
+        v.push(row(
+            "shell radii increasing",
+            format!("n={n} S={s} r=[{near},{far}]"),
+            f64::from(u8::from(ok)),
+            Expect::Close { to: 1.0, rel: 0.0 },
+        ));
+        let k = fluence_per_power(cell_solid_angle(n), r[0], r[1]);
+        v.push(row("Δr/V innermost cone", format!("n={n} S={s} r_far={far}"), k, Expect::Positive));
+    }
+    v.push(row(
+        "centroid radius",
+        "a=0, b=1".into(),
+        centroid_radius(0.0, 1.0),
+        Expect::Close { to: 0.75, rel: 1e-15 },
+    ));
+    v.push(row("centroid radius", "a=b=1e-300".into(), centroid_radius(1e-300, 1e-300), Expect::Finite));
+    v.push(row(
+        "centroid radius",
+        "a=1e100, b=2e100".into(),
+        centroid_radius(1e100, 2e100),
+        Expect::InRange(1e100, 2e100),
+    ));
+    v.push(row(
+        "Δr/V",
+        "a=1e200, b=2e200 (overflow → 0)".into(),
+        fluence_per_power(1.0, 1e200, 2e200),
+        Expect::InRange(0.0, 0.0),
+    ));
+    for (name, d) in
+        [("+z", DVec3::Z), ("−z", -DVec3::Z), ("+x", DVec3::X), ("1e-300 off −z", DVec3::new(1e-300, 0.0, -1.0))]
+    {
+        let e = (octa::decode(octa::encode(d)) - d.normalize()).length();
+        v.push(row("octahedral round trip error", name.into(), e, Expect::InRange(0.0, 1e-15)));
+    }
+    let through =
+        super::radial_propagate::inverse_square_integral(DVec3::new(-1.0, 0.0, 0.0), DVec3::X, 2.0, DVec3::ZERO, 1e-4);
+    v.push(row(
+        "∫ds/r² through the light",
+        "b=0 (floor 1e-4)".into(),
+        through,
+        Expect::Close { to: std::f64::consts::PI / 1e-4, rel: 1e-3 },
+    ));
+    let far =
+        super::radial_propagate::inverse_square_integral(DVec3::new(-1e9, 1.0, 0.0), DVec3::X, 2e9, DVec3::ZERO, 1e-4);
+    v.push(row("∫ds/r² infinite line", "b=1".into(), far, Expect::Close { to: std::f64::consts::PI, rel: 1e-8 }));
+    v
+}

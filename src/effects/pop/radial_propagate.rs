@@ -391,7 +391,7 @@ pub fn step(grid: &RadialGrid, flow: &FlowTable, p: &[Rgb], a: Option<&[Rgb]>) -
 pub fn inverse_square_integral(a: DVec3, u: DVec3, len: f64, c: DVec3, b_min: f64) -> f64 {
     let w = c - a;
     let delta = w.dot(u);
-    let b = (w.length_squared() - delta * delta).max(0.0).sqrt().max(b_min);
+    let b = (w - u * delta).length().max(b_min);
     if !(len > 0.0) || !b.is_finite() {
         return 0.0;
     }
@@ -461,7 +461,7 @@ impl super::render::StepSource for PointDirect<'_> {
         let u = seg / len;
         let w = light.position - a;
         let delta = w.dot(u);
-        let dist = (w.length_squared() - delta * delta).max(0.0).sqrt().max(R_MIN);
+        let dist = (w - u * delta).length().max(R_MIN);
         // Equiangular variable: t = Δ + b tan θ, dt/r² = dθ/b, and μ = −sin θ.
         let (th_a, th_b) = ((-delta / dist).atan(), ((len - delta) / dist).atan());
         let panels = ((th_b - th_a) / 0.05).ceil().clamp(1.0, 64.0) as usize;

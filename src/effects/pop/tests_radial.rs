@@ -82,7 +82,7 @@ fn single_scattering_quadrature(
     let (t_in, t_out) = (t0.min(t1).max_element().max(0.0), t0.max(t1).min_element());
     let w = l.position - eye;
     let delta = w.dot(dir);
-    let b = (w.length_squared() - delta * delta).max(0.0).sqrt().max(rp::R_MIN);
+    let b = (w - dir * delta).length().max(rp::R_MIN);
     let (ta, tb) = (((t_in - delta) / b).atan(), ((t_out - delta) / b).atan());
     let (ss, st, g) = (m.sigma_s[ch], m.sigma_s[ch] + m.sigma_a[ch], m.g[ch]);
     // Composite Gauss–Legendre (3 points) on `nodes` panels.
