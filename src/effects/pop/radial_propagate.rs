@@ -212,8 +212,8 @@ pub fn initialise(
                         continue;
                     }
                     let h = depth[tx + side * ty];
-                    for ch in 0..3 {
-                        emitted[ch] += p * light.intensity[ch];
+                    for (e, i) in emitted.iter_mut().zip(light.intensity) {
+                        *e += p * i;
                     }
                     for k in 0..shells {
                         let (r0, r1) = (grid.radii[k], grid.radii[k + 1]);
@@ -392,7 +392,7 @@ pub fn inverse_square_integral(a: DVec3, u: DVec3, len: f64, c: DVec3, b_min: f6
     let w = c - a;
     let delta = w.dot(u);
     let b = (w - u * delta).length().max(b_min);
-    if !(len > 0.0) || !b.is_finite() {
+    if len.is_nan() || len <= 0.0 || !b.is_finite() {
         return 0.0;
     }
     (((len - delta) / b).atan() + (delta / b).atan()) / b
@@ -455,7 +455,7 @@ impl super::render::StepSource for PointDirect<'_> {
         let light = &self.init.light;
         let seg = b - a;
         let len = seg.length();
-        if !(len > 0.0) {
+        if len.is_nan() || len <= 0.0 {
             return [0.0; 3];
         }
         let u = seg / len;

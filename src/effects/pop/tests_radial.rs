@@ -40,8 +40,8 @@ fn sweep_matches_the_closed_forms_of_the_uncollided_and_first_scattered_light() 
     let grid = RadialGrid::new(&m, l.position, 8, 12, &NoOccluder).unwrap();
     let (_, unc, seed, emitted) = rp::initialise(&grid, &m, &l, &NoOccluder);
     let st = ss + sa;
-    for ch in 0..3 {
-        assert!((emitted[ch] - 4.0 * PI * l.intensity[ch]).abs() < 1e-12 * emitted[ch]);
+    for (e, i) in emitted.iter().zip(l.intensity) {
+        assert!((e - 4.0 * PI * i).abs() < 1e-12 * e);
     }
     let na = grid.angular();
     let mut checked = 0;
