@@ -530,13 +530,19 @@ fn plan_ms_lobes(t: &ValidatedTable, d: &MsLobes, needs: &Needs) -> TablePlan {
 /// A screen-space effect stage renders its own scene: it runs when that scene is among the planned
 /// scenes and has what the effect needs (`lacks` names what is missing).
 /// What a scene lacks for POP (`PopRender` and its `PopPreset` table): a global medium that scatters
-/// forward (`g ≥ 0`), or a directional light.
+/// forward (`g ≥ 0`), or a directional, point, spot or sphere light (rectilinear and radial grids).
 fn pop_lacks(sc: &Scene) -> Option<&'static str> {
+    use crate::scene::LightKind;
     let media = sc.media.iter().filter(|m| m.boundary == crate::scene::Boundary::Global).collect::<Vec<_>>();
     if media.len() != 1 || media[0].g.iter().any(|g| *g < 0.0) {
         Some("single forward-scattering global medium")
-    } else if !sc.lights.iter().any(|l| matches!(l.kind, crate::scene::LightKind::Directional { .. })) {
-        Some("directional light")
+    } else if !sc.lights.iter().any(|l| {
+        matches!(
+            l.kind,
+            LightKind::Directional { .. } | LightKind::Point { .. } | LightKind::Spot { .. } | LightKind::Sphere { .. }
+        )
+    }) {
+        Some("directional, point, spot or sphere light")
     } else {
         None
     }
@@ -628,7 +634,7 @@ impl Plan {
                     Some(sc) => compiled(
                         t,
                         format!(
-                            "POP preset (kept whole): {} has a global medium and a directional light",
+                            "POP preset (kept whole): {} has a global medium and a light POP propagates",
                             sc.source.display()
                         ),
                         Vec::new(),
@@ -636,7 +642,8 @@ impl Plan {
                     ),
                     None => skipped(
                         t,
-                        "no scene has a global medium lit by a directional light (what POP propagates)".into(),
+                        "no scene has a global medium lit by a directional, point, spot or sphere light (what POP propagates)"
+                            .into(),
                     ),
                 },
             })

@@ -27,7 +27,10 @@ use serde::{Deserialize, Serialize};
 use super::view::{self, ms};
 use super::{StageContext, StageError, StageOutcome};
 use crate::effects::pop::grid::Grid;
+use crate::effects::pop::merge;
 use crate::effects::pop::propagate::{self, FlowTable, Observer, PhaseTimes, Settings};
+use crate::effects::pop::radial::RadialGrid;
+use crate::effects::pop::radial_propagate;
 use crate::effects::pop::render::{self, MarchOptions};
 use crate::effects::pop::scene::{self as pop_scene, BvhOccluder, RawDensity, SceneMedia};
 use crate::effects::{Image, RgbImage, ViewCamera};
@@ -68,6 +71,12 @@ crate::declare_params! {
         fig12_size: u32 = 64, unit = "px", range = "4 to 1024";
         /// Paths per pixel of the path-traced cube images.
         fig12_samples: u32 = 64, unit = "paths", range = "1 to 100000";
+        /// Paths per pixel of an independent path-traced image of the scattered light (the scene with
+        /// black surfaces, the lights POP propagates and the medium confined to POP's box) that POP's
+        /// scattered light is compared with (0: none).
+        reference_samples: u32 = 0, unit = "paths", range = "0 to 100000";
+        /// Width of the reference comparison (both images; the height follows the camera's aspect).
+        reference_width: u32 = 64, unit = "px", range = "4 to 1024";
         /// Output folder name in the output directory; empty means the stage id.
         output: String = String::new(), unit = "", range = "plain folder name";
     }
@@ -75,14 +84,18 @@ crate::declare_params! {
 
 super::view::impl_view_fields!(PopRender);
 
-/// One directional light's propagation.
+/// One light's propagation.
 #[derive(Debug, Clone, Serialize)]
 pub struct LightRun {
     /// Light name.
     pub light: String,
-    /// Grid cells (lateral, lateral, along the light).
+    /// `"directional"` (rectilinear grid, elek2014 Sec. 4) or `"point"` (radial grid, Sec. 6; spot and
+    /// sphere lights too).
+    pub kind: &'static str,
+    /// Grid cells: (lateral, lateral, along the light), or for a radial grid (octahedral n, n, shells).
     pub grid: [usize; 3],
-    /// Cell size \[m\].
+    /// Cell size \[m\]; for a radial grid the innermost shell's outer radius, the outermost's, and the
+    /// angular cell size \[rad\].
     pub cell: [f64; 3],
     /// Eq. 10's switch iteration `m'`.
     pub switch_iteration: usize,
@@ -96,6 +109,8 @@ pub struct LightRun {
     pub grid_ms: f64,
     /// Phase times \[ms\] (on the GPU: initialisation on the CPU, the iterations' GPU times).
     pub phases_ms: PhaseMs,
+    /// Merging this radial grid into the medium-aligned render grid \[ms\] (0 for directional lights).
+    pub merge_ms: f64,
     /// `"cpu"` or `"gpu"`: where the iterations ran.
     pub device: &'static str,
     /// GPU time per pass kind (empty on the CPU).
@@ -162,6 +177,28 @@ pub struct PopSummary {
     pub skipped: Vec<String>,
     /// elek2014 Fig. 12 against Monte-Carlo light tracing.
     pub fig12: Vec<Fig12Row>,
+    /// POP's scattered light against path tracing of the same view (`reference_samples > 0`).
+    pub reference: Option<ReferenceComparison>,
+}
+
+/// POP's scattered light against an independent path-traced image of it.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReferenceComparison {
+    /// Image size of both.
+    pub size: [usize; 2],
+    /// Paths per pixel of the reference.
+    pub samples: u32,
+    /// Relative RMS error of POP's scattered light, `sqrt(Σ(pop − ref)²/Σ ref²)` over pixels and channels.
+    pub error: f64,
+    /// The reference's own noise in the same units, `sqrt(Σ stderr²/Σ ref²)`: part of `error`.
+    pub reference_noise: f64,
+    /// `error` with the noise removed, `sqrt(error² − noise²)`: the expected error against a noise-free
+    /// reference.
+    pub error_corrected: f64,
+    /// Ratio of POP's summed scattered light to the reference's (energy bias).
+    pub total_ratio: f64,
+    /// POP frame (all phases) and path-tracing times \[ms\].
+    pub ms: [f64; 2],
 }
 
 /// A rendered POP frame (no G-buffer colour).
@@ -275,6 +312,8 @@ pub fn render_frame(
         let seeded = p.energy.first().copied().unwrap_or(0.0);
         lights.push(LightRun {
             light: name.clone(),
+            kind: "directional",
+            merge_ms: 0.0,
             grid: grid.dims,
             cell: grid.size,
             switch_iteration: settings.switch_iteration,
@@ -287,9 +326,98 @@ pub fn render_frame(
             gpu_passes,
         });
     }
+    if !media.points.is_empty() {
+        let f = render_points(media, &occluder, table, cam, distance, &opts, &mut lights)?;
+        march_ms += f.march_ms;
+        for (s, r) in scattered.iter_mut().zip(&f.frame.radiance) {
+            for c in 0..3 {
+                s[c] += r[c];
+            }
+        }
+        transmittance = f.frame.transmittance;
+    }
     let to_img =
         |v: Vec<[f64; 3]>| Image { width: w, height: h, data: v.into_iter().map(|c| c.map(|x| x as f32)).collect() };
     Ok(PopFrame { scattered: to_img(scattered), transmittance: to_img(transmittance), lights, march_ms })
+}
+
+/// The point lights' part of a frame.
+struct PointFrame {
+    frame: render::Frame,
+    march_ms: f64,
+}
+
+/// The merge grid's resolution: double the preset's rectilinear grid (elek2014 Sec. 5.3), at most 128.
+pub fn merge_dims(table: &PopPresetTable) -> [usize; 3] {
+    table.def.grid.map(|v| (2 * v as usize).clamp(1, 128))
+}
+
+/// The iteration settings of a radial grid: Eq. 10 with the mean `σ_s` of its occupied cells and the mean
+/// shell spacing `r_far/S`, at least `S` iterations before the switch.
+pub fn radial_settings(table: &PopPresetTable, grid: &RadialGrid) -> (Settings, FlowTable) {
+    let occupied: Vec<f64> = grid
+        .cells
+        .iter()
+        .filter(|c| c.density > 0.0)
+        .map(|c| (c.sigma_s[0] + c.sigma_s[1] + c.sigma_s[2]) / 3.0)
+        .collect();
+    let sigma_s_mean = if occupied.is_empty() { 0.0 } else { occupied.iter().sum::<f64>() / occupied.len() as f64 };
+    let g = (grid.g[0] + grid.g[1] + grid.g[2]) / 3.0;
+    let s = grid.shells();
+    preset_settings(table, g, sigma_s_mean, grid.radii[s] / s as f64, s)
+}
+
+/// Propagates every point light on its radial grid (CPU), merges the grids into one medium-aligned grid
+/// and ray-marches it with the lights' single scattering.
+fn render_points(
+    media: &SceneMedia,
+    occluder: &BvhOccluder<'_>,
+    table: &PopPresetTable,
+    cam: &ViewCamera,
+    distance: &[f64],
+    opts: &MarchOptions,
+    runs: &mut Vec<LightRun>,
+) -> Result<PointFrame, String> {
+    let [n, shells] = table.def.radial_grid.map(|v| v as usize);
+    let mut grids = Vec::new();
+    for (light, name) in media.points.iter().zip(&media.point_names) {
+        let t0 = Instant::now();
+        let grid = RadialGrid::new(&media.medium, light.position, n, shells, occluder)?;
+        let grid_ms = ms(t0);
+        let (settings, flow) = radial_settings(table, &grid);
+        let p = radial_propagate::propagate(&grid, &media.medium, light, occluder, &flow, &settings, cam.position);
+        let seeded = p.energy.first().copied().unwrap_or(0.0);
+        runs.push(LightRun {
+            light: name.clone(),
+            kind: "point",
+            grid: [n, n, grid.shells()],
+            cell: [grid.radii[1], grid.radii[grid.shells()], (4.0 * std::f64::consts::PI).sqrt() / n as f64],
+            switch_iteration: settings.switch_iteration,
+            anisotropic_iterations: p.anisotropic_iterations,
+            isotropic_iterations: p.isotropic_iterations,
+            residual_energy: if seeded > 0.0 { p.energy.last().copied().unwrap_or(0.0) / seeded } else { 0.0 },
+            grid_ms,
+            phases_ms: p.times.into(),
+            merge_ms: 0.0,
+            device: "cpu",
+            gpu_passes: Vec::new(),
+        });
+        grids.push((grid, p));
+    }
+    let t0 = Instant::now();
+    let merged = Grid::medium_aligned(&media.medium, merge_dims(table))?;
+    let sources: Vec<(&RadialGrid, &[[f64; 3]])> = grids.iter().map(|(g, p)| (g, p.toward_eye.as_slice())).collect();
+    let merged_field = merge::merge(&merged, &sources);
+    let merge_ms = ms(t0);
+    // The merge is shared; each light is charged its share.
+    let first = runs.len() - grids.len();
+    for r in &mut runs[first..] {
+        r.merge_ms = merge_ms / grids.len() as f64;
+    }
+    let t0 = Instant::now();
+    let lights: Vec<(&RadialGrid, &radial_propagate::RadialPropagation)> = grids.iter().map(|(g, p)| (g, p)).collect();
+    let frame = merge::march_points(&merged, &merged_field, &lights, &media.medium, cam, Some(distance), opts);
+    Ok(PointFrame { frame, march_ms: ms(t0) })
 }
 
 /// `colour · transmittance (+ scattered)`.
@@ -332,6 +460,16 @@ impl PopRender {
         }
         if !(4..=1024).contains(&self.fig12_size) {
             issue("fig12_size", format!("fig12_size = {}", self.fig12_size), "use 4 to 1024");
+        }
+        if self.reference_samples > 100_000 {
+            issue(
+                "reference_samples",
+                format!("reference_samples = {}", self.reference_samples),
+                "use 0 (no comparison) to 100000",
+            );
+        }
+        if !(4..=1024).contains(&self.reference_width) {
+            issue("reference_width", format!("reference_width = {}", self.reference_width), "use 4 to 1024");
         }
         if !(1..=100_000).contains(&self.fig12_samples) {
             issue("fig12_samples", format!("fig12_samples = {}", self.fig12_samples), "use 1 to 100000");
@@ -405,6 +543,7 @@ impl PopRender {
             ray_march_ms: frame.march_ms,
             skipped: media.skipped.clone(),
             fig12,
+            reference: self.reference(id, ctx, &table, &media, &dir, &mut outputs)?,
         };
         outputs.push(view::write_json(id, &dir.join("summary.json"), &summary)?);
         let prop_ms: f64 = frame.lights.iter().map(|l| l.phases_ms.propagation + l.phases_ms.residuum).sum();
@@ -415,6 +554,15 @@ impl PopRender {
             frame.lights.len(),
             frame.march_ms
         );
+        if let Some(r) = &summary.reference {
+            line.push_str(&format!(
+                "; vs path tracing at {}×{}: scattered light {:.1} % off (noise-corrected), total ×{:.3}",
+                r.size[0],
+                r.size[1],
+                100.0 * r.error_corrected,
+                r.total_ratio
+            ));
+        }
         for r in &summary.fig12 {
             line.push_str(&format!(
                 "; Fig. 12 g {}: collided fluence {:.0} %, image {:.0} % off",
@@ -425,6 +573,77 @@ impl PopRender {
         }
         Ok(StageOutcome { outputs, summary: format!("{line} → {}", dir.display()) })
     }
+}
+
+impl PopRender {
+    /// POP's scattered light against path tracing of the same view at `reference_width` (module doc of
+    /// [`pop_scene::scattering_reference_scene`]); writes `reference_scattered.png` and
+    /// `reference_pop.png` beside the stage's image.
+    fn reference(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+        table: &PopPresetTable,
+        media: &SceneMedia,
+        dir: &Path,
+        outputs: &mut Vec<std::path::PathBuf>,
+    ) -> Result<Option<ReferenceComparison>, StageError> {
+        if self.reference_samples == 0 {
+            return Ok(None);
+        }
+        let fields = self.fields();
+        let w = self.reference_width as usize;
+        let h = ((w as f64 * self.height as f64 / self.width as f64).round() as usize).max(1);
+        let v = fields.load(id, ctx, Some((w, h)))?;
+        let distance: Vec<f64> = v.gbuffer.distance.data.iter().map(|&d| f64::from(d)).collect();
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
+        let cam = &v.gbuffer.camera;
+        let t0 = Instant::now();
+        let frame = render_frame(media, &v.bvh, table, cam, &distance, self.range_sigma, &crate::gpu::Device::Cpu)
+            .map_err(fail)?;
+        let pop_ms = ms(t0);
+        let c = compare_with_reference(&v.scene, media, cam, &frame.scattered, self.reference_samples);
+        for (name, img) in [("reference_scattered.png", &c.1), ("reference_pop.png", &frame.scattered)] {
+            let png = dir.join(name);
+            crate::image_io::write_png_preview(&png, w, h, &img.data, None).map_err(|e| StageError::Output {
+                stage: id.into(),
+                path: png.clone(),
+                message: e.to_string(),
+            })?;
+            outputs.push(png);
+        }
+        Ok(Some(ReferenceComparison { ms: [pop_ms, c.0.ms[1]], ..c.0 }))
+    }
+}
+
+/// Path-traces `scene`'s scattered light as POP sees it ([`pop_scene::scattering_reference_scene`]) from
+/// `cam` with `samples` paths per pixel and compares `pop` with it; returns the comparison (POP time 0)
+/// and the reference image.
+pub fn compare_with_reference(
+    scene: &Scene,
+    media: &SceneMedia,
+    cam: &ViewCamera,
+    pop: &RgbImage,
+    samples: u32,
+) -> (ReferenceComparison, RgbImage) {
+    let ref_scene = pop_scene::scattering_reference_scene(scene, media);
+    let bvh = SceneBvh::build(&ref_scene);
+    let t0 = Instant::now();
+    let (img, _, noise) = view::path_trace(&ref_scene, &bvh, cam, samples, 256, true);
+    let ref_ms = ms(t0);
+    let error = crate::effects::rel_rmse(pop, &img);
+    let sum = |i: &RgbImage| i.data.iter().map(|c| c.iter().map(|&v| f64::from(v)).sum::<f64>()).sum::<f64>();
+    let r = sum(&img);
+    let c = ReferenceComparison {
+        size: [cam.width, cam.height],
+        samples,
+        error,
+        reference_noise: noise,
+        error_corrected: (error * error - noise * noise).max(0.0).sqrt(),
+        total_ratio: if r > 0.0 { sum(pop) / r } else { 0.0 },
+        ms: [0.0, ref_ms],
+    };
+    (c, img)
 }
 
 /// The Fig. 12 settings of a preset on an `n³` cube grid (Eq. 10's switch with the cube's `σ_s`).
@@ -668,19 +887,21 @@ impl PopRender {
         let init = median(&sum(|l| l.phases_ms.initialisation));
         let prop = median(&sum(|l| l.phases_ms.propagation));
         let res = median(&sum(|l| l.phases_ms.residuum));
+        let merge_ms = median(&sum(|l| l.merge_ms));
         let march = median(&|f: &PopFrame| f.march_ms);
         let l = &runs[0].lights;
         let iters: usize = l.iter().map(|r| r.anisotropic_iterations).sum();
         let iso: usize = l.iter().map(|r| r.isotropic_iterations).sum();
         let (w, h) = (v.gbuffer.camera.width, v.gbuffer.camera.height);
         let mut text = format!(
-            "{id}: elek2014 POP, preset grid {:?}, {}×{}, {} threads (median of 5)\n\n| phase (Fig. 14) | ms |\n|---|---:|\n| importance, ordinates | not implemented (directional lights only) |\n| grid + medium downsampling | {grid_ms:.2} |\n| initialisation | {init:.2} |\n| propagation ({iters} iterations, {:.3} ms each) | {prop:.2} |\n| residuum ({iso} iterations) | {res:.2} |\n| merge/upsample + ray march | {march:.1} |\n| frame | {:.1} |\n",
+            "{id}: elek2014 POP, preset grid {:?}, {}×{}, {} threads (median of 5)\n\n| phase (Fig. 14) | ms |\n|---|---:|\n| importance, ordinates | not implemented (directional and point lights only) |\n| lights | {} |\n| grid + medium downsampling | {grid_ms:.2} |\n| initialisation (point lights: depth map + radial sweep) | {init:.2} |\n| propagation ({iters} iterations, {:.3} ms each) | {prop:.2} |\n| residuum ({iso} iterations) | {res:.2} |\n| merge radial grids into the render grid | {merge_ms:.2} |\n| upsample + ray march | {march:.1} |\n| frame | {:.1} |\n",
             table.def.grid,
             w,
             h,
             rayon::current_num_threads(),
+            l.iter().map(|r| format!("{} ({})", r.light, r.kind)).collect::<Vec<_>>().join(", "),
             prop / iters.max(1) as f64,
-            grid_ms + init + prop + res + march
+            grid_ms + init + prop + res + merge_ms + march
         );
         // The residuum on a thick, nearly conservative cube.
         let n = table.def.grid.map(|v| v as usize);

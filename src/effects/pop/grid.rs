@@ -20,6 +20,27 @@ pub trait Occluder: Sync {
     /// True when the ray from `origin` along unit `direction` hits a surface before leaving the
     /// scene (a shadow ray toward a distant light).
     fn ray_blocked(&self, origin: DVec3, direction: DVec3) -> bool;
+    /// Distance from `origin` along unit `direction` to the first surface (`INFINITY` when none). The
+    /// default narrows it down from [`Occluder::segment_blocked`] by bisection (to `1e-9` of the
+    /// distance); scene occluders answer it with one closest-hit query.
+    fn hit_distance(&self, origin: DVec3, direction: DVec3) -> f64 {
+        if !self.ray_blocked(origin, direction) {
+            return f64::INFINITY;
+        }
+        let mut hi = 1.0;
+        while !self.segment_blocked(origin, origin + direction * hi) {
+            hi *= 2.0;
+            if !hi.is_finite() {
+                return f64::INFINITY;
+            }
+        }
+        let mut lo = 0.0;
+        while hi - lo > 1e-9 * hi {
+            let mid = 0.5 * (lo + hi);
+            if self.segment_blocked(origin, origin + direction * mid) { hi = mid } else { lo = mid }
+        }
+        hi
+    }
 }
 
 /// No surfaces: nothing is ever blocked.
@@ -120,6 +141,30 @@ impl Grid {
         };
         grid.cells = grid.sample_medium(medium);
         grid.build_links(occluder);
+        Ok(grid)
+    }
+
+    /// A grid aligned with the medium's box (axes x, y, z) holding only the averaged medium, no links:
+    /// the single medium-aligned grid that radial grids are merged into (elek2014 Sec. 5.3) for rendering.
+    ///
+    /// # Errors
+    /// A message when a dimension is 0.
+    pub fn medium_aligned(medium: &VoxelMedium, dims: [usize; 3]) -> Result<Self, String> {
+        if dims.contains(&0) {
+            return Err(format!("merge grid {dims:?} has a zero dimension; every axis needs ≥ 1 cell"));
+        }
+        let ext = medium.max - medium.min;
+        let mut grid = Grid {
+            origin: medium.min,
+            axes: [DVec3::X, DVec3::Y, DVec3::Z],
+            dims,
+            size: [ext.x / dims[0] as f64, ext.y / dims[1] as f64, ext.z / dims[2] as f64],
+            cells: Vec::new(),
+            g: medium.g,
+            link_transmittance: Vec::new(),
+            link_decay: Vec::new(),
+        };
+        grid.cells = grid.sample_medium(medium);
         Ok(grid)
     }
 

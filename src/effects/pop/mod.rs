@@ -20,9 +20,15 @@
 pub mod fig12;
 pub mod grid;
 pub mod medium;
+pub mod merge;
+pub mod octa;
 pub mod propagate;
+pub mod radial;
+pub mod radial_propagate;
 pub mod render;
 pub mod scene;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_radial;

@@ -98,6 +98,15 @@ fn clip(min: DVec3, max: DVec3, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
     (exit > enter).then_some((enter, exit))
 }
 
+/// A source of light scattered toward the eye that the ray marcher evaluates per step instead of reading
+/// it from a grid (a point light's single scattering, whose `1/r²` no grid resolves).
+pub trait StepSource: Sync {
+    /// Over the step from `a` to `b` (the eye lies behind `a`), `∫ J(s) e^{−σ_t s} ds` per channel: the
+    /// radiance `J` scattered toward the eye per unit `σ_s` \[W/(m² sr) per 1/m\], weighted by the
+    /// transmittance from `a` with the step's extinction `sigma_t` \[1/m\].
+    fn step_integral(&self, a: DVec3, b: DVec3, sigma_t: Rgb) -> Rgb;
+}
+
 /// Ray-marches every pixel. `surface_distance` (per pixel, `INFINITY` when the ray escapes) stops the
 /// march at the first surface.
 pub fn march(
@@ -107,6 +116,19 @@ pub fn march(
     camera: &ViewCamera,
     surface_distance: Option<&[f64]>,
     opts: &MarchOptions,
+) -> Frame {
+    march_with(grid, toward_eye, medium, camera, surface_distance, opts, &[])
+}
+
+/// [`march`] with extra per-step sources added to the upsampled grid value.
+pub fn march_with(
+    grid: &Grid,
+    toward_eye: &[Rgb],
+    medium: &VoxelMedium,
+    camera: &ViewCamera,
+    surface_distance: Option<&[f64]>,
+    opts: &MarchOptions,
+    sources: &[&dyn StepSource],
 ) -> Frame {
     // Steps resolve the finer of voxels and cells; a uniform density has no voxel detail to resolve.
     let cell = grid.size.iter().copied().fold(f64::INFINITY, f64::min);
@@ -138,6 +160,18 @@ pub fn march(
                     continue;
                 }
                 let j = upsample(grid, toward_eye, medium, p, inv_range);
+                let mut extra = [0.0; 3];
+                if !sources.is_empty() {
+                    let a = camera.position + dir * (t0 + s as f64 * dt);
+                    let b = camera.position + dir * (t0 + (s + 1) as f64 * dt);
+                    let sigma_t = [0, 1, 2].map(|c| rho * (medium.sigma_s[c] + medium.sigma_a[c]));
+                    for src in sources {
+                        let e = src.step_integral(a, b, sigma_t);
+                        for c in 0..3 {
+                            extra[c] += e[c];
+                        }
+                    }
+                }
                 for c in 0..3 {
                     let ss = rho * medium.sigma_s[c];
                     let st = ss + rho * medium.sigma_a[c];
@@ -146,7 +180,7 @@ pub fn march(
                     }
                     // ∫ T σ_s J over the step for constant coefficients, without cancellation.
                     let absorbed = -(-st * dt).exp_m1();
-                    radiance[c] += trans[c] * absorbed * (ss / st) * j[c];
+                    radiance[c] += trans[c] * (absorbed * (ss / st) * j[c] + ss * extra[c]);
                     trans[c] *= 1.0 - absorbed;
                 }
             }
