@@ -23,6 +23,9 @@ pub struct LobeSlice<'a> {
     e2: Vec<f64>,
     /// `Σ w_g w_α density_{g,α}` `[z][ρ]`.
     density: Vec<f64>,
+    /// `total − α² E_2` (orders ≥ 3) `[z][ρ][θ][φ]`: inside the grid both parts are non-negative blends
+    /// without decay, so their difference is one array.
+    multiple: Vec<f64>,
     /// Outward decay rate of `total` and the density.
     kappa: f64,
     /// Outward decay rate of `E_2` (the free-flight rate).
@@ -53,20 +56,22 @@ impl MsLobesTable {
             let d = self.double.get(&gi).ok_or_else(|| format!("g slice {} is not loaded", self.g_values()[gi]))?;
             add(&mut e2, d, wg);
             for &(ai, wa) in aw.iter().filter(|w| w.1 > 0.0) {
-                let missing = || {
-                    format!("slice (albedo {}, g {}) is not loaded", self.albedo_values()[ai], self.g_values()[gi])
-                };
+                let missing =
+                    || format!("slice (albedo {}, g {}) is not loaded", self.albedo_values()[ai], self.g_values()[gi]);
                 add(&mut total, self.total.get(&(gi, ai)).ok_or_else(missing)?, wg * wa);
                 add(&mut density, self.density.get(&(gi, ai)).ok_or_else(missing)?, wg * wa);
             }
         }
         debug_assert!(total.len() % lobe_len.max(1) == 0);
+        let a2 = medium.albedo * medium.albedo;
+        let multiple = total.iter().zip(&e2).map(|(t, d)| t - a2 * d).collect();
         Ok(LobeSlice {
             table: self,
             medium: *medium,
             total,
             e2,
             density,
+            multiple,
             kappa: decay_rate(medium.albedo, medium.g),
             kappa_double: decay_rate(0.0, 0.0),
         })
@@ -95,6 +100,23 @@ impl LobeSlice<'_> {
         let st = self.medium.sigma_t;
         let (rho, z, theta, phi) = beam_coordinates(self.table.lobe, st, beam, x, omega)?;
         scale_cubed(self.lobe(rho, z, theta, phi)?, st)
+    }
+
+    /// `total − double` of [`Self::radiance`] (scattering orders ≥ 3) with one array look-up inside the
+    /// grid (the same value up to rounding); beyond it the two parts decay at different rates and are
+    /// looked up separately.
+    pub fn multiple_radiance(&self, beam: ([f64; 3], [f64; 3]), x: [f64; 3], omega: [f64; 3]) -> Result<f64, String> {
+        let m = &self.medium;
+        let st = m.sigma_t;
+        let (rho, z, theta, phi) = beam_coordinates(self.table.lobe, st, beam, x, omega)?;
+        let at: Located = self.table.locate(&LobeQuery { albedo: m.albedo, g: m.g, rho, z, theta, phi })?;
+        if at.decay(self.kappa) == 1.0 && at.decay(self.kappa_double) == 1.0 {
+            let lobe_len = self.table.theta_bins * self.table.phi_nodes;
+            let v = scale_cubed(LobeValue { total: at.sample(&self.multiple, lobe_len), double: 0.0 }, st)?;
+            return Ok(v.total);
+        }
+        let v = scale_cubed(self.lobe(rho, z, theta, phi)?, st)?;
+        Ok(v.total - v.double)
     }
 
     /// [`MsLobesTable::density`] at canonical `(ρ, z)` for this channel.

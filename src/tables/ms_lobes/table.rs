@@ -80,6 +80,8 @@ pub struct MsLobesTable {
     s_nodes: Vec<f64>,
     rho: GradedAxis,
     z: GradedAxis,
+    /// The grid's outer edges `(ρ_max, z_min, z_max)` (computed once; every look-up clamps to them).
+    edges: (f64, f64, f64),
     pub(super) theta_bins: usize,
     pub(super) phi_nodes: usize,
     pub(super) lobe: LobeKind,
@@ -223,6 +225,10 @@ impl MsLobesTable {
             s_nodes: def.albedo_values().iter().rev().map(|&a| s_of(a)).collect(),
             rho: def.rho_axis(),
             z: def.z_axis(),
+            edges: {
+                let (r, z) = (def.rho_axis(), def.z_axis());
+                (r.edge(r.bins), z.edge(0), z.edge(z.bins))
+            },
             theta_bins: def.theta_bins as usize,
             phi_nodes: def.phi_nodes(),
             lobe: def.lobe,
@@ -376,8 +382,8 @@ impl MsLobesTable {
             return Err(format!("theta = {} and phi = {} must lie in [0, π]", q.theta, q.phi));
         }
         // Nearest grid point and the outward decay.
-        let rho_b = q.rho.min(self.rho.edge(self.rho.bins));
-        let z_b = q.z.clamp(self.z.edge(0), self.z.edge(self.z.bins));
+        let rho_b = q.rho.min(self.edges.0);
+        let z_b = q.z.clamp(self.edges.1, self.edges.2);
         Ok(Located {
             r: (q.rho * q.rho + q.z * q.z).sqrt(),
             r_b: (rho_b * rho_b + z_b * z_b).sqrt(),
@@ -444,8 +450,8 @@ impl MsLobesTable {
     /// The angle-integrated density `Σ_{k≥2} α^k ψ_k` at canonical `(ρ, z)` (interpolated like [`Self::lobe`]).
     pub fn density(&self, albedo: f64, g: f64, rho: f64, z: f64) -> Result<f64, String> {
         let (gw, aw) = self.weights(albedo, g)?;
-        let rho_b = rho.min(self.rho.edge(self.rho.bins));
-        let z_b = z.clamp(self.z.edge(0), self.z.edge(self.z.bins));
+        let rho_b = rho.min(self.edges.0);
+        let z_b = z.clamp(self.edges.1, self.edges.2);
         let (r, r_b) = ((rho * rho + z * z).sqrt(), (rho_b * rho_b + z_b * z_b).sqrt());
         let spatial = self.spatial_weights(rho_b, z_b);
         let mut acc = 0.0;

@@ -267,6 +267,8 @@ fn slice_matches_the_table() {
         for (u, v) in [(a.total, b.total), (a.double, b.double)] {
             assert!((u - v).abs() <= 1e-12 * u.abs().max(1e-300), "{x:?}: {a:?} vs {b:?}");
         }
+        let mult = s.multiple_radiance(beam, x, omega).unwrap();
+        assert!((mult - (a.total - a.double)).abs() <= 1e-12 * a.total.max(1e-300), "{x:?}: {mult} vs {a:?}");
         let (rho, z) = (0.5 + i as f64, 3.0 - 2.0 * i as f64);
         let (u, v) = (t.density(m.albedo, m.g, rho, z).unwrap(), s.density(rho, z).unwrap());
         assert!((u - v).abs() <= 1e-12 * u.abs(), "density at ({rho}, {z}): {u} vs {v}");
