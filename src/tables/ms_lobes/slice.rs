@@ -62,7 +62,7 @@ impl MsLobesTable {
                 add(&mut density, self.density.get(&(gi, ai)).ok_or_else(missing)?, wg * wa);
             }
         }
-        debug_assert!(total.len() % lobe_len.max(1) == 0);
+        debug_assert!(total.len().is_multiple_of(lobe_len.max(1)));
         let a2 = medium.albedo * medium.albedo;
         let multiple = total.iter().zip(&e2).map(|(t, d)| t - a2 * d).collect();
         Ok(LobeSlice {
