@@ -11,6 +11,8 @@
 //! - [`octree`] (Sec. 3.4, 4.2, 4.3): the spatial hierarchy over volume and surface samples, its
 //!   ray traversal (single scattering), its tree cuts (Algorithm 1) and the two-step traversal.
 //! - [`render`] (Sec. 3.5, 5.1): camera rays, sample depths (Eq. 10) and the components (Eq. 5–9).
+//! - [`surface_light`] (Sec. 3.5.5): the diffuse light the boundary sends into the object, with every
+//!   internal reflection.
 //! - [`compare`]: MSE against the reference (normalisation stated there), error against run time.
 //! - [`mod@reference`]: an independent volumetric path tracer for dielectric-bounded homogeneous media,
 //!   split by the number of scattering events in the medium.
@@ -32,6 +34,7 @@ pub mod reference;
 pub mod render;
 #[cfg(test)]
 mod render_tests;
+pub mod surface_light;
 
 use glam::DVec3;
 

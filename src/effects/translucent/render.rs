@@ -31,12 +31,16 @@
 //!    the table's lobes of orders ≥ 3 (`total − double`) for the beam of each cut entry: a volume
 //!    sample is the part of a beam between two points, so its response is exactly the beam from its
 //!    start with its entering flux minus the beam from its end with its leaving flux; a node uses the
-//!    flux-weighted starts and ends and the mean direction of its samples.
+//!    flux-weighted starts and ends and the mean direction of its samples. The look-ups go to each
+//!    channel's [`LobeSlice`], extracted from the table once per frame (Sec. 4.1).
 //! 4. *Bounced* (Eq. 8): the surface samples emit diffusely into the object what the scene's indirect
 //!    light sends in (`(1 − F_dr,out)·E_indirect`) and what the surface reflects back from inside
-//!    (`F_dr,in·E_inner`, `E_inner` from the volume samples' single scattering and the table's
-//!    collision density: the irradiance of an isotropic field `φ/4`, computed once per light set with
-//!    the preprocessing); a tree cut over the surface samples gathers `σ_s L_s A cos e^{−σ_t q}/q² p(q̂·ω)`.
+//!    (`F_dr,in·E_inner`; `E_inner` is `φ/4` of the light scattered at least once, from the table's
+//!    scattering-event density `σ_s φ`; `reflection_terms > 1` sums further internal reflections,
+//!    [`super::surface_light`]); a tree cut over the surface samples gathers their first scattering
+//!    `σ_s L_s A cos e^{−σ_t q}/q² p(q̂·ω)` and, beyond wang2018, the later orders of the same light: the
+//!    table's response to a beam along the node's mean inward normal (flux `S A` from the samples minus
+//!    what is left unscattered at their chords' ends).
 //!
 //! **Singularities.** Eq. 6 and Eq. 8's `1/r²` use `max(r, clamp_mfp/σ_t)`; the bias is measured by
 //! the tests (it vanishes as the samples get denser and the clamp smaller).
@@ -58,7 +62,7 @@ use crate::effects::ViewCamera;
 use crate::physics::hg::phase;
 use crate::physics::rng::StreamKey;
 use crate::scene::bvh::Ray;
-use crate::tables::ms_lobes::{MediumChannel, MsLobesTable};
+use crate::tables::ms_lobes::{LobeSlice, MediumChannel, MsLobesTable};
 
 /// Quality knobs of the renderer (defaults near the paper's sweet spots where it gives them).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -91,6 +95,9 @@ pub struct RenderOptions {
     pub clamp_mfp: f64,
     /// Two-step traversal with 2×2 sharing for single scattering (Sec. 4.3).
     pub two_step: bool,
+    /// Most terms of the series of internal reflections of diffuse light ([`super::surface_light`]);
+    /// 1 is wang2018's single reflection.
+    pub reflection_terms: usize,
     /// Height above the leaves where the first step stops.
     pub stop_height: u8,
     /// Seed of the diffuse rays.
@@ -113,6 +120,7 @@ impl Default for RenderOptions {
             single_layer_mfp: 8.0,
             clamp_mfp: 0.0625,
             two_step: true,
+            reflection_terms: 1,
             stop_height: 3,
             seed: 0,
         }
@@ -240,8 +248,14 @@ impl VolAgg {
 struct SurfAgg {
     /// `Σ L_s A` per channel \[W/sr\] (radiance emitted into the object times area).
     power: [f64; 3],
+    /// Flux `Σ S A` emitted into the object, per channel \[W\] (the beam along the inward normal).
+    flux0: [f64; 3],
+    /// The part of it left unscattered at the chord's end, `Σ S A e^{−σ_t d}`.
+    flux1: [f64; 3],
     /// Power-weighted position.
     pos: DVec3,
+    /// Power-weighted chord end.
+    end: DVec3,
     /// Sum of power-weighted inward normals.
     normal: DVec3,
     w: f64,
@@ -253,8 +267,11 @@ impl SurfAgg {
         for p in parts {
             for c in 0..3 {
                 a.power[c] += p.power[c];
+                a.flux0[c] += p.flux0[c];
+                a.flux1[c] += p.flux1[c];
             }
             a.pos += p.pos;
+            a.end += p.end;
             a.normal += p.normal;
             a.w += p.w;
         }
@@ -274,8 +291,14 @@ pub struct Prepared {
     surf_tree: Octree,
     surf_agg: Vec<SurfAgg>,
     surf_items: Vec<SurfAgg>,
-    /// Per surface sample, the irradiance reaching it from inside the object \[W/m²\].
+    /// Per surface sample, the irradiance reaching it from inside the object from the volume samples
+    /// \[W/m²\].
     pub inner_irradiance: Vec<[f64; 3]>,
+    /// Per surface sample, the exitance it emits diffusely into the object \[W/m²\] (indirect light and
+    /// every internal reflection, [`super::surface_light`]).
+    pub exitance: Vec<[f64; 3]>,
+    /// Terms of the internal-reflection series summed.
+    pub reflection_terms: usize,
     /// Wall time of [`super::points::generate`], the trees and the inner irradiance \[ms\].
     pub preprocess_ms: f64,
     /// Bytes held by the samples, trees and aggregates.
@@ -297,6 +320,11 @@ pub fn diffuse_fresnel(eta_i: f64, eta_t: f64) -> f64 {
 /// Per-channel media of the material for the table's look-ups.
 fn channels(m: &Material) -> [MediumChannel; 3] {
     std::array::from_fn(|c| MediumChannel { albedo: m.albedo[c], sigma_t: m.sigma_t[c], g: m.g })
+}
+
+/// The table's lobes of each channel, extracted once (wang2018 Sec. 4.1).
+fn slices<'t>(table: &'t MsLobesTable, ch: &[MediumChannel; 3]) -> Result<Vec<LobeSlice<'t>>, String> {
+    ch.iter().map(|m| table.slice(m)).collect()
 }
 
 /// Light samples, trees and the inner irradiance of the surface samples (everything that depends on
@@ -324,26 +352,43 @@ pub fn prepare(
     // Inner irradiance of every surface sample: single-scattered light of the volume samples plus the
     // table's collision density of orders ≥ 2 (φ/4 of an isotropic field).
     let ch = channels(&m);
-    let eval = Evaluator { setup, table, opts, ch, vol_tree: &vol_tree, vol_agg: &vol_agg, vol_items: &vol_items };
+    let slices = slices(table, &ch)?;
+    let eval =
+        Evaluator { setup, slices: &slices, opts, ch, vol_tree: &vol_tree, vol_agg: &vol_agg, vol_items: &vol_items };
     let inner_irradiance: Vec<[f64; 3]> =
         points.surface.par_iter().map(|s| eval.inner_irradiance(s)).collect::<Result<Vec<_>, String>>()?;
 
-    // Surface samples as diffuse emitters into the object.
+    // Surface samples as diffuse emitters into the object, with the series of internal reflections.
     let (f_out, f_in) = (diffuse_fresnel(1.0, m.ior), diffuse_fresnel(m.ior, 1.0));
-    let surf_items: Vec<SurfAgg> = points
-        .surface
-        .iter()
-        .zip(&inner_irradiance)
-        .map(|(s, e_in)| {
-            let power: [f64; 3] =
-                std::array::from_fn(|c| ((1.0 - f_out) * s.indirect[c] + f_in * e_in[c]) / PI * s.area);
-            let w = power.iter().sum::<f64>();
-            SurfAgg { power, pos: s.position * w, normal: -s.normal * w, w }
-        })
-        .collect();
     let sitems: Vec<Item> =
         points.surface.iter().map(|s| Item { position: s.position, bounds: (s.position, s.position) }).collect();
     let surf_tree = Octree::build(&sitems, 8, 24);
+    let clamp: [f64; 3] = std::array::from_fn(|c| opts.clamp_mfp / sigma_t[c]);
+    let emission = super::surface_light::emission(
+        setup,
+        &points.surface,
+        &surf_tree,
+        &slices,
+        &inner_irradiance,
+        (f_out, f_in),
+        opts.epsilon_multiple,
+        clamp,
+        opts.reflection_terms,
+    )?;
+    let surf_items: Vec<SurfAgg> = points
+        .surface
+        .iter()
+        .zip(&emission.exitance)
+        .zip(&emission.chord)
+        .map(|((s, ex), &d)| {
+            let power: [f64; 3] = std::array::from_fn(|c| ex[c] / PI * s.area);
+            let flux0: [f64; 3] = std::array::from_fn(|c| ex[c] * s.area);
+            let flux1: [f64; 3] = std::array::from_fn(|c| flux0[c] * (-sigma_t[c] * d).exp());
+            let end = if d.is_finite() { s.position - s.normal * d } else { s.position };
+            let w = power.iter().sum::<f64>();
+            SurfAgg { power, flux0, flux1, pos: s.position * w, end: end * w, normal: -s.normal * w, w }
+        })
+        .collect();
     let surf_agg = surf_tree.bottom_up(
         |ids| SurfAgg::merge(&ids.iter().map(|&i| surf_items[i as usize]).collect::<Vec<_>>()),
         SurfAgg::merge,
@@ -355,7 +400,8 @@ pub fn prepare(
         + (surf_agg.len() + surf_items.len()) * std::mem::size_of::<SurfAgg>()
         + (vol_tree.nodes.len() + surf_tree.nodes.len()) * std::mem::size_of::<super::octree::Node>()
         + (vol_tree.items.len() + surf_tree.items.len()) * 4
-        + inner_irradiance.len() * 24;
+        + inner_irradiance.len() * 24
+        + emission.exitance.len() * 32;
     Ok(Prepared {
         points,
         vol_tree,
@@ -365,6 +411,8 @@ pub fn prepare(
         surf_agg,
         surf_items,
         inner_irradiance,
+        exitance: emission.exitance,
+        reflection_terms: emission.terms,
         preprocess_ms: t0.elapsed().as_secs_f64() * 1e3,
         memory_bytes,
     })
@@ -458,7 +506,8 @@ impl Frame {
 
 struct Evaluator<'a> {
     setup: &'a Setup<'a>,
-    table: &'a MsLobesTable,
+    /// Per channel, the table's lobes.
+    slices: &'a [LobeSlice<'a>],
     opts: &'a RenderOptions,
     ch: [MediumChannel; 3],
     vol_tree: &'a Octree,
@@ -467,7 +516,7 @@ struct Evaluator<'a> {
 }
 
 /// Solid angle of a ball of radius `radius` seen from distance `dist` (capped at 2π inside it).
-fn solid_angle(radius: f64, dist: f64) -> f64 {
+pub(super) fn solid_angle(radius: f64, dist: f64) -> f64 {
     if dist <= radius {
         return 2.0 * PI;
     }
@@ -552,13 +601,10 @@ impl Evaluator<'_> {
                     continue;
                 }
                 let look = |origin: DVec3| {
-                    self.table.radiance(&self.ch[c], (origin.to_array(), dir.to_array()), p.to_array(), w.to_array())
+                    self.slices[c].multiple_radiance((origin.to_array(), dir.to_array()), p.to_array(), w.to_array())
                 };
                 match (look(start), look(end)) {
-                    (Ok(v0), Ok(v1)) => {
-                        let m = a.phi0[c] * (v0.total - v0.double) - a.phi1[c] * (v1.total - v1.double);
-                        *mc += m.max(0.0);
-                    }
+                    (Ok(v0), Ok(v1)) => *mc += (a.phi0[c] * v0 - a.phi1[c] * v1).max(0.0),
                     _ => failed += 1,
                 }
             }
@@ -587,7 +633,9 @@ impl Evaluator<'_> {
         );
     }
 
-    /// Irradiance reaching a surface sample from inside (see the module doc).
+    /// Irradiance reaching a surface sample from inside from the volume samples: the irradiance `φ/4`
+    /// of an isotropic field whose fluence `φ` is that of the light scattered at least once (the table's
+    /// scattering-event density of orders ≥ 2 is `σ_s φ`).
     fn inner_irradiance(&self, s: &SurfaceSample) -> Result<[f64; 3], String> {
         let mut out = [0.0; 3];
         if self.vol_tree.nodes.is_empty() {
@@ -596,33 +644,21 @@ impl Evaluator<'_> {
         let p = s.position;
         let mut cut = Vec::new();
         self.coarse_cut(p, &mut cut);
-        let g = self.ch[0].g;
         for e in &cut {
             let a = self.entry(e);
-            let (center, start, end, dir) = a.points();
-            let q = p - center;
-            let r = q.length();
-            if r > 0.0 {
-                let qh = q / r;
-                let cos = qh.dot(s.normal).max(0.0);
-                let ph = phase(dir.dot(qh), g);
-                for (c, o) in out.iter_mut().enumerate() {
-                    let rc = self.clamp_r(r, c);
-                    *o += self.ch[c].albedo * self.sigma(c) * a.lam[c] * ph * (-self.sigma(c) * r).exp() / (rc * rc)
-                        * cos;
-                }
-            }
+            let (_, start, end, dir) = a.points();
             for (c, o) in out.iter_mut().enumerate() {
                 if self.ch[c].albedo <= 0.0 {
                     continue;
                 }
                 let st = self.sigma(c);
+                let ss = self.ch[c].albedo * st;
                 let fluence = |origin: DVec3| -> Result<f64, String> {
                     let v = p - origin;
                     let z = v.dot(dir);
                     let rho = (v - z * dir).length();
-                    // Collision density per unit volume per watt is σ_t³ ψ(σ_t x); fluence = density/σ_t.
-                    Ok(self.table.density(self.ch[c].albedo, g, st * rho, st * z)? * st * st)
+                    // Scattering-event density per unit volume per watt: σ_t³ D(σ_t x) = σ_s φ.
+                    Ok(self.slices[c].density(st * rho, st * z)? * st * st * st / ss)
                 };
                 let m = a.phi0[c] * fluence(start)? - a.phi1[c] * fluence(end)?;
                 *o += 0.25 * m.max(0.0);
@@ -646,11 +682,13 @@ pub fn render(
     let (w, h) = (camera.width, camera.height);
     let n = w * h;
     let m = setup.material;
+    let ch = channels(&m);
+    let slices = slices(table, &ch)?;
     let eval = Evaluator {
         setup,
-        table,
+        slices: &slices,
         opts,
-        ch: channels(&m),
+        ch,
         vol_tree: &prepared.vol_tree,
         vol_agg: &prepared.vol_agg,
         vol_items: &prepared.vol_items,
@@ -836,6 +874,21 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
         for (c, o) in out.iter_mut().enumerate() {
             let rc = eval.clamp_r(r, c);
             *o += eval.ch[c].albedo * eval.sigma(c) * a.power[c] * cos * ph * (-eval.sigma(c) * r).exp() / (rc * rc);
+        }
+        // Orders ≥ 2 of the emitted light: the table's response to a beam along the mean inward normal,
+        // from the samples' positions with their flux minus from the chords' ends with what is left.
+        let Some(dir) = nrm.try_normalize() else { continue };
+        let end = a.end / a.w;
+        for (c, o) in out.iter_mut().enumerate() {
+            if eval.ch[c].albedo <= 0.0 || a.flux0[c] <= 0.0 {
+                continue;
+            }
+            let look = |origin: DVec3| {
+                eval.slices[c].radiance((origin.to_array(), dir.to_array()), p.to_array(), w.to_array())
+            };
+            let v0 = look(pos).map_or(0.0, |v| v.total);
+            let v1 = if a.flux1[c] > 0.0 { look(end).map_or(0.0, |v| v.total) } else { 0.0 };
+            *o += (a.flux0[c] * v0 - a.flux1[c] * v1).max(0.0);
         }
     }
     out

@@ -32,6 +32,7 @@
 //! no code with the generator, and checks conservation (`Σ α^k` collisions per photon).
 
 mod materials;
+mod slice;
 mod table;
 #[cfg(test)]
 mod tests;
@@ -39,6 +40,7 @@ mod tests;
 use serde::{Deserialize, Serialize};
 
 pub use materials::{Material, material, materials};
+pub use slice::LobeSlice;
 pub use table::{LobeQuery, LobeValue, LobesReadError, MediumChannel, MsLobesTable};
 
 use super::phase_hg::Element;

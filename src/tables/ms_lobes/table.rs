@@ -80,41 +80,49 @@ pub struct MsLobesTable {
     s_nodes: Vec<f64>,
     rho: GradedAxis,
     z: GradedAxis,
-    theta_bins: usize,
-    phi_nodes: usize,
-    lobe: LobeKind,
+    /// The grid's outer edges `(ρ_max, z_min, z_max)` (computed once; every look-up clamps to them).
+    edges: (f64, f64, f64),
+    pub(super) theta_bins: usize,
+    pub(super) phi_nodes: usize,
+    pub(super) lobe: LobeKind,
     /// `(g index, albedo index)` → `[z][ρ][θ][φ]`.
-    total: HashMap<(usize, usize), Vec<f64>>,
+    pub(super) total: HashMap<(usize, usize), Vec<f64>>,
     /// `(g index, albedo index)` → `[z][ρ]`.
-    density: HashMap<(usize, usize), Vec<f64>>,
+    pub(super) density: HashMap<(usize, usize), Vec<f64>>,
     /// g index → `E_2` `[z][ρ][θ][φ]`.
-    double: HashMap<usize, Vec<f64>>,
+    pub(super) double: HashMap<usize, Vec<f64>>,
     /// `[g][k − 1]`.
     inside: Vec<Vec<f64>>,
 }
 
-/// Interpolation weights of one query point.
-struct Located {
+/// Interpolation weights of one query point (at most four spatial and four angular nodes; unused
+/// entries carry weight 0 and are skipped).
+pub(super) struct Located {
     r: f64,
     r_b: f64,
-    spatial: Vec<(usize, f64)>,
-    angular: Vec<(usize, f64)>,
+    spatial: [(usize, f64); 4],
+    angular: [(usize, f64); 4],
 }
 
 impl Located {
     /// Weighted sum over the cells and lobe nodes of one slice (`lobe_len` values per cell).
-    fn sample(&self, v: &[f64], lobe_len: usize) -> f64 {
+    pub(super) fn sample(&self, v: &[f64], lobe_len: usize) -> f64 {
         let mut acc = 0.0;
-        for &(cell, wc) in &self.spatial {
-            for &(o, wo) in &self.angular {
+        for &(cell, wc) in self.spatial.iter().filter(|w| w.1 > 0.0) {
+            for &(o, wo) in self.angular.iter().filter(|w| w.1 > 0.0) {
                 acc += wc * wo * v[cell * lobe_len + o];
             }
         }
         acc
     }
 
+    /// Weighted sum over the cells of a `[z][ρ]` array.
+    pub(super) fn sample_cells(&self, v: &[f64]) -> f64 {
+        self.spatial.iter().filter(|w| w.1 > 0.0).map(|&(c, w)| w * v[c]).sum::<f64>()
+    }
+
     /// `(r_b/r) e^{−κ(r − r_b)}` beyond the grid, 1 inside.
-    fn decay(&self, kappa: f64) -> f64 {
+    pub(super) fn decay(&self, kappa: f64) -> f64 {
         if self.r > self.r_b && self.r_b > 0.0 {
             (self.r_b / self.r) * (-kappa * (self.r - self.r_b)).exp()
         } else {
@@ -217,6 +225,10 @@ impl MsLobesTable {
             s_nodes: def.albedo_values().iter().rev().map(|&a| s_of(a)).collect(),
             rho: def.rho_axis(),
             z: def.z_axis(),
+            edges: {
+                let (r, z) = (def.rho_axis(), def.z_axis());
+                (r.edge(r.bins), z.edge(0), z.edge(z.bins))
+            },
             theta_bins: def.theta_bins as usize,
             phi_nodes: def.phi_nodes(),
             lobe: def.lobe,
@@ -289,7 +301,7 @@ impl MsLobesTable {
 
     /// Interpolation weights over g slices and albedo nodes.
     #[allow(clippy::type_complexity)]
-    fn weights(&self, albedo: f64, g: f64) -> Result<(Vec<(usize, f64)>, Vec<(usize, f64)>), String> {
+    pub(super) fn weights(&self, albedo: f64, g: f64) -> Result<(Vec<(usize, f64)>, Vec<(usize, f64)>), String> {
         if !(0.0..=1.0).contains(&albedo) {
             return Err(format!("albedo = {albedo} is outside [0, 1]"));
         }
@@ -357,7 +369,7 @@ impl MsLobesTable {
     }
 
     /// Checks a query's coordinates and finds its interpolation weights.
-    fn locate(&self, q: &LobeQuery) -> Result<Located, String> {
+    pub(super) fn locate(&self, q: &LobeQuery) -> Result<Located, String> {
         for (name, v) in [("rho", q.rho), ("z", q.z), ("theta", q.theta), ("phi", q.phi), ("albedo", q.albedo)] {
             if !v.is_finite() {
                 return Err(format!("{name} = {v} is not finite"));
@@ -370,8 +382,8 @@ impl MsLobesTable {
             return Err(format!("theta = {} and phi = {} must lie in [0, π]", q.theta, q.phi));
         }
         // Nearest grid point and the outward decay.
-        let rho_b = q.rho.min(self.rho.edge(self.rho.bins));
-        let z_b = q.z.clamp(self.z.edge(0), self.z.edge(self.z.bins));
+        let rho_b = q.rho.min(self.edges.0);
+        let z_b = q.z.clamp(self.edges.1, self.edges.2);
         Ok(Located {
             r: (q.rho * q.rho + q.z * q.z).sqrt(),
             r_b: (rho_b * rho_b + z_b * z_b).sqrt(),
@@ -381,7 +393,7 @@ impl MsLobesTable {
     }
 
     /// Bilinear weights over cell centres (flat beyond the first / last centre).
-    fn spatial_weights(&self, rho: f64, z: f64) -> Vec<(usize, f64)> {
+    fn spatial_weights(&self, rho: f64, z: f64) -> [(usize, f64); 4] {
         let axis_w = |axis: &GradedAxis, x: f64| -> [(usize, f64); 2] {
             let c = (axis.coordinate(x) - 0.5).clamp(0.0, (axis.bins - 1) as f64);
             let i = (c.floor() as usize).min(axis.bins.saturating_sub(2));
@@ -389,19 +401,17 @@ impl MsLobesTable {
             if axis.bins == 1 { [(0, 1.0), (0, 0.0)] } else { [(i, 1.0 - f), (i + 1, f)] }
         };
         let (wr, wz) = (axis_w(&self.rho, rho), axis_w(&self.z, z));
-        let mut out = Vec::with_capacity(4);
-        for (iz, a) in wz {
-            for (ir, b) in wr {
-                if a * b > 0.0 {
-                    out.push((iz * self.rho.bins + ir, a * b));
-                }
+        let mut out = [(0, 0.0); 4];
+        for (k, (iz, a)) in wz.into_iter().enumerate() {
+            for (l, (ir, b)) in wr.into_iter().enumerate() {
+                out[2 * k + l] = (iz * self.rho.bins + ir, a * b);
             }
         }
         out
     }
 
     /// Linear weights over θ (and φ) nodes, as offsets within a cell's lobe.
-    fn angular_weights(&self, theta: f64, phi: f64) -> Vec<(usize, f64)> {
+    fn angular_weights(&self, theta: f64, phi: f64) -> [(usize, f64); 4] {
         let lin = |x: f64, n: usize| -> [(usize, f64); 2] {
             let c = (x / PI * (n - 1) as f64).clamp(0.0, (n - 1) as f64);
             let i = (c.floor() as usize).min(n - 2);
@@ -410,15 +420,13 @@ impl MsLobesTable {
         };
         let wt = lin(theta, self.theta_bins);
         if self.lobe == LobeKind::Symmetric || self.phi_nodes < 2 {
-            return wt.into_iter().filter(|w| w.1 > 0.0).collect();
+            return [wt[0], wt[1], (0, 0.0), (0, 0.0)];
         }
         let wp = lin(phi, self.phi_nodes);
-        let mut out = Vec::with_capacity(4);
-        for (it, a) in wt {
-            for (ip, b) in wp {
-                if a * b > 0.0 {
-                    out.push((it * self.phi_nodes + ip, a * b));
-                }
+        let mut out = [(0, 0.0); 4];
+        for (k, (it, a)) in wt.into_iter().enumerate() {
+            for (l, (ip, b)) in wp.into_iter().enumerate() {
+                out[2 * k + l] = (it * self.phi_nodes + ip, a * b);
             }
         }
         out
@@ -434,74 +442,92 @@ impl MsLobesTable {
         x: [f64; 3],
         omega: [f64; 3],
     ) -> Result<LobeValue, String> {
-        let (origin, direction) = beam;
-        let st = medium.sigma_t;
-        if !(st.is_finite() && st > 0.0) {
-            return Err(format!("sigma_t = {st} must be finite and > 0"));
-        }
-        let unit = |v: [f64; 3], name: &str| -> Result<[f64; 3], String> {
-            let n = dot(v, v).sqrt();
-            if !(n.is_finite() && n > 0.0) {
-                return Err(format!("{name} must be a finite non-zero vector"));
-            }
-            Ok([v[0] / n, v[1] / n, v[2] / n])
-        };
-        let d = unit(direction, "the beam direction")?;
-        let w = unit(omega, "omega")?;
-        let p = [x[0] - origin[0], x[1] - origin[1], x[2] - origin[2]];
-        if !p.iter().all(|c| c.is_finite()) {
-            return Err("the point and the beam origin must be finite".into());
-        }
-        let z = dot(p, d);
-        let perp = [p[0] - z * d[0], p[1] - z * d[1], p[2] - z * d[2]];
-        let rho = dot(perp, perp).sqrt();
-        let r = dot(p, p).sqrt();
-        let (a, e1) = if r > 0.0 {
-            let a = [p[0] / r, p[1] / r, p[2] / r];
-            let e1 = if rho > 0.0 {
-                let rh = [perp[0] / rho, perp[1] / rho, perp[2] / rho];
-                [(z * rh[0] - rho * d[0]) / r, (z * rh[1] - rho * d[1]) / r, (z * rh[2] - rho * d[2]) / r]
-            } else {
-                crate::physics::lobe_transport::lobe_frame([0.0, 0.0, 1.0]).1
-            };
-            (a, e1)
-        } else {
-            (d, [0.0; 3])
-        };
-        let theta = dot(a, w).clamp(-1.0, 1.0).acos();
-        let phi = if self.lobe == LobeKind::Full && dot(e1, e1) > 0.0 {
-            let e2 = cross(a, e1);
-            dot(w, e2).abs().atan2(dot(w, e1))
-        } else {
-            0.0
-        };
-        let q = LobeQuery { albedo: medium.albedo, g: medium.g, rho: st * rho, z: st * z, theta, phi };
-        let v = self.lobe(&q)?;
-        let s3 = st * st * st;
-        let scale = |x: f64| if x == 0.0 { 0.0 } else { x * s3 };
-        let out = LobeValue { total: scale(v.total), double: scale(v.double) };
-        if out.total.is_finite() && out.double.is_finite() {
-            Ok(out)
-        } else {
-            Err(format!("sigma_t = {st} overflows the σ_t³ scaling of the lobe; use scene units nearer 1/σ_t"))
-        }
+        let (rho, z, theta, phi) = beam_coordinates(self.lobe, medium.sigma_t, beam, x, omega)?;
+        let q = LobeQuery { albedo: medium.albedo, g: medium.g, rho, z, theta, phi };
+        scale_cubed(self.lobe(&q)?, medium.sigma_t)
     }
 
     /// The angle-integrated density `Σ_{k≥2} α^k ψ_k` at canonical `(ρ, z)` (interpolated like [`Self::lobe`]).
     pub fn density(&self, albedo: f64, g: f64, rho: f64, z: f64) -> Result<f64, String> {
         let (gw, aw) = self.weights(albedo, g)?;
-        let rho_b = rho.min(self.rho.edge(self.rho.bins));
-        let z_b = z.clamp(self.z.edge(0), self.z.edge(self.z.bins));
+        let rho_b = rho.min(self.edges.0);
+        let z_b = z.clamp(self.edges.1, self.edges.2);
         let (r, r_b) = ((rho * rho + z * z).sqrt(), (rho_b * rho_b + z_b * z_b).sqrt());
         let spatial = self.spatial_weights(rho_b, z_b);
         let mut acc = 0.0;
         for &(gi, wg) in gw.iter().filter(|w| w.1 > 0.0) {
             for &(ai, wa) in aw.iter().filter(|w| w.1 > 0.0) {
                 let v = self.density.get(&(gi, ai)).ok_or("slice not loaded")?;
-                acc += wg * wa * spatial.iter().map(|&(c, w)| w * v[c]).sum::<f64>();
+                acc += wg * wa * spatial.iter().filter(|w| w.1 > 0.0).map(|&(c, w)| w * v[c]).sum::<f64>();
             }
         }
         let decay = if r > r_b && r_b > 0.0 { (r_b / r) * (-decay_rate(albedo, g) * (r - r_b)).exp() } else { 1.0 };
         Ok(acc * decay)
+    }
+}
+
+/// The canonical look-up coordinates `(σ_t ρ, σ_t z, θ, φ)` of the point `x` and direction `omega`
+/// relative to a beam (origin, direction) in a medium of extinction `sigma_t` (φ is 0 for symmetric
+/// lobes). Refuses non-finite or zero vectors and a bad `sigma_t`.
+pub(super) fn beam_coordinates(
+    lobe: LobeKind,
+    sigma_t: f64,
+    beam: ([f64; 3], [f64; 3]),
+    x: [f64; 3],
+    omega: [f64; 3],
+) -> Result<(f64, f64, f64, f64), String> {
+    let (origin, direction) = beam;
+    let st = sigma_t;
+    if !(st.is_finite() && st > 0.0) {
+        return Err(format!("sigma_t = {st} must be finite and > 0"));
+    }
+    let unit = |v: [f64; 3], name: &str| -> Result<[f64; 3], String> {
+        let n = dot(v, v).sqrt();
+        if !(n.is_finite() && n > 0.0) {
+            return Err(format!("{name} must be a finite non-zero vector"));
+        }
+        Ok([v[0] / n, v[1] / n, v[2] / n])
+    };
+    let d = unit(direction, "the beam direction")?;
+    let w = unit(omega, "omega")?;
+    let p = [x[0] - origin[0], x[1] - origin[1], x[2] - origin[2]];
+    if !p.iter().all(|c| c.is_finite()) {
+        return Err("the point and the beam origin must be finite".into());
+    }
+    let z = dot(p, d);
+    let perp = [p[0] - z * d[0], p[1] - z * d[1], p[2] - z * d[2]];
+    let rho = dot(perp, perp).sqrt();
+    let r = dot(p, p).sqrt();
+    let (a, e1) = if r > 0.0 {
+        let a = [p[0] / r, p[1] / r, p[2] / r];
+        let e1 = if rho > 0.0 {
+            let rh = [perp[0] / rho, perp[1] / rho, perp[2] / rho];
+            [(z * rh[0] - rho * d[0]) / r, (z * rh[1] - rho * d[1]) / r, (z * rh[2] - rho * d[2]) / r]
+        } else {
+            crate::physics::lobe_transport::lobe_frame([0.0, 0.0, 1.0]).1
+        };
+        (a, e1)
+    } else {
+        (d, [0.0; 3])
+    };
+    let theta = dot(a, w).clamp(-1.0, 1.0).acos();
+    let phi = if lobe == LobeKind::Full && dot(e1, e1) > 0.0 {
+        let e2 = cross(a, e1);
+        dot(w, e2).abs().atan2(dot(w, e1))
+    } else {
+        0.0
+    };
+    Ok((st * rho, st * z, theta, phi))
+}
+
+/// A canonical lobe value scaled to a medium of extinction `sigma_t` (`× σ_t³`); refuses an overflow.
+pub(super) fn scale_cubed(v: LobeValue, sigma_t: f64) -> Result<LobeValue, String> {
+    let s3 = sigma_t * sigma_t * sigma_t;
+    let scale = |x: f64| if x == 0.0 { 0.0 } else { x * s3 };
+    let out = LobeValue { total: scale(v.total), double: scale(v.double) };
+    if out.total.is_finite() && out.double.is_finite() {
+        Ok(out)
+    } else {
+        Err(format!("sigma_t = {sigma_t} overflows the σ_t³ scaling of the lobe; use scene units nearer 1/σ_t"))
     }
 }

@@ -246,3 +246,39 @@ fn open_loads_only_the_needed_slices() {
 }
 
 use crate::tables::TableDef;
+
+/// A channel's extracted slice answers like the table (same interpolation; only the order of the
+/// g/albedo blend differs, so within rounding) inside the grid, outside it and behind the beam, and
+/// refuses what the table refuses.
+#[test]
+fn slice_matches_the_table() {
+    let def = small_def(vec![0.0, 0.7], vec![0.5, 0.9]);
+    let (_, t) = build(&def, 9);
+    let m = MediumChannel { albedo: 0.8, sigma_t: 3.0, g: 0.4 };
+    let s = t.slice(&m).unwrap();
+    let mut checked = 0;
+    for (i, x) in [[0.1, 0.2, 0.3], [2.0, -1.0, 0.5], [-0.4, 0.05, 0.0], [30.0, 2.0, -7.0], [0.0, 0.0, 1e-9]]
+        .into_iter()
+        .enumerate()
+    {
+        let beam = ([0.0, 0.0, 0.0], [0.3, -0.2, 0.9]);
+        let omega = [0.2 + 0.1 * i as f64, 0.7, -0.4];
+        let (a, b) = (t.radiance(&m, beam, x, omega).unwrap(), s.radiance(beam, x, omega).unwrap());
+        for (u, v) in [(a.total, b.total), (a.double, b.double)] {
+            assert!((u - v).abs() <= 1e-12 * u.abs().max(1e-300), "{x:?}: {a:?} vs {b:?}");
+        }
+        let mult = s.multiple_radiance(beam, x, omega).unwrap();
+        assert!((mult - (a.total - a.double)).abs() <= 1e-12 * a.total.max(1e-300), "{x:?}: {mult} vs {a:?}");
+        let (rho, z) = (0.5 + i as f64, 3.0 - 2.0 * i as f64);
+        let (u, v) = (t.density(m.albedo, m.g, rho, z).unwrap(), s.density(rho, z).unwrap());
+        assert!((u - v).abs() <= 1e-12 * u.abs(), "density at ({rho}, {z}): {u} vs {v}");
+        assert!(u > 0.0);
+        checked += 1;
+    }
+    assert_eq!(checked, 5);
+    assert!(s.radiance(([0.0; 3], [0.0; 3]), [1.0; 3], [0.0, 0.0, 1.0]).is_err());
+    assert!(s.density(f64::NAN, 1.0).is_err());
+    assert!(t.slice(&MediumChannel { albedo: 0.95, ..m }).unwrap_err().contains("albedo"));
+    assert!(t.slice(&MediumChannel { g: 0.8, ..m }).unwrap_err().contains("g list"));
+    assert!(t.slice(&MediumChannel { sigma_t: 0.0, ..m }).is_err());
+}
