@@ -352,65 +352,84 @@ pub(crate) fn initialise(grid: &Grid, light: &DirectionalLight, occluder: &dyn O
     (uncollided, seed)
 }
 
+/// Every source cell's flow partition for one iteration, `[channel][front, side, back]` (Eq. 2 at the
+/// cell's anisotropy); empty for the isotropic residuum (`a = None`), which uses `flow.lookup(0)`.
+pub(crate) fn partitions(flow: &FlowTable, a: Option<&[Rgb]>) -> Vec<[[f64; 3]; 3]> {
+    match a {
+        Some(a) => a.par_iter().map(|v| [flow.lookup(v[0]), flow.lookup(v[1]), flow.lookup(v[2])]).collect(),
+        None => Vec::new(),
+    }
+}
+
+/// One cell's gather (Eqs. 4–6), shared by the rectilinear and the radial grids: what flows in over
+/// `links` — (source cell, part index front/side/back, link transmittance, link decay) — from the
+/// field `l`, and the new anisotropy, the flow-weighted mean of the sources' decayed `a` (0 for the
+/// isotropic residuum, `a = None`, whose partition is `iso`).
+pub(crate) fn gather(
+    links: impl IntoIterator<Item = (usize, usize, Rgb, Rgb)>,
+    l: &[Rgb],
+    parts: &[[[f64; 3]; 3]],
+    iso: [f64; 3],
+    a: Option<&[Rgb]>,
+) -> (Rgb, Rgb) {
+    let mut sum_l = [0.0; 3];
+    let mut sum_la = [0.0; 3];
+    for (src, part, t, decay) in links {
+        for ch in 0..3 {
+            let ls = l[src][ch];
+            if ls <= 0.0 || t[ch] <= 0.0 {
+                continue;
+            }
+            let frac = match a {
+                Some(_) => parts[src][ch][part],
+                None => iso[part],
+            };
+            let dl = ls * t[ch] * frac;
+            sum_l[ch] += dl;
+            if let Some(a) = a {
+                sum_la[ch] += dl * a[src][ch] * decay[ch];
+            }
+        }
+    }
+    let mut na = [0.0; 3];
+    if a.is_some() {
+        for ch in 0..3 {
+            if sum_l[ch] > 0.0 {
+                na[ch] = (sum_la[ch] / sum_l[ch]).clamp(-1.0, 1.0);
+            }
+        }
+    }
+    (sum_l, na)
+}
+
 /// One gathering iteration (Eqs. 2–6). `a = None`: isotropic residuum (all lobes `a = 0`).
 fn step(grid: &Grid, flow: &FlowTable, l: &[Rgb], a: Option<&[Rgb]>) -> (Vec<Rgb>, Vec<Rgb>) {
     let iso = flow.lookup(0.0);
-    // Partition of every source cell once per iteration: [channel][front, side, back].
-    let parts: Vec<[[f64; 3]; 3]> = match a {
-        Some(a) => a.par_iter().map(|v| [flow.lookup(v[0]), flow.lookup(v[1]), flow.lookup(v[2])]).collect(),
-        None => Vec::new(),
-    };
+    let parts = partitions(flow, a);
     let dims = grid.dims;
     let out: Vec<(Rgb, Rgb)> = (0..grid.len())
         .into_par_iter()
         .map(|n| {
             let c = grid.coords(n);
-            let mut sum_l = [0.0; 3];
-            let mut sum_la = [0.0; 3];
-            for axis in 0..3 {
-                for dir in [-1i64, 1] {
-                    let nb = c[axis] as i64 + dir;
-                    if nb < 0 || nb >= dims[axis] as i64 {
-                        continue;
-                    }
-                    let mut sc = c;
-                    sc[axis] = nb as usize;
-                    let src = grid.index(sc);
-                    // The link is stored at the lower cell of the pair.
-                    let link = if dir < 0 { src } else { n };
-                    let t = grid.link_transmittance[link][axis];
-                    // Part index: flow along +d from a src behind (dir < 0) is "front".
-                    let part = match (axis, dir) {
-                        (2, -1) => 0,
-                        (2, _) => 2,
-                        _ => 1,
-                    };
-                    for ch in 0..3 {
-                        let ls = l[src][ch];
-                        if ls <= 0.0 || t[ch] <= 0.0 {
-                            continue;
-                        }
-                        let frac = match a {
-                            Some(_) => parts[src][ch][part],
-                            None => iso[part],
-                        };
-                        let dl = ls * t[ch] * frac;
-                        sum_l[ch] += dl;
-                        if let Some(a) = a {
-                            sum_la[ch] += dl * a[src][ch] * grid.link_decay[link][axis][ch];
-                        }
-                    }
+            let links = (0..3).flat_map(|axis| [-1i64, 1].map(|dir| (axis, dir))).filter_map(|(axis, dir)| {
+                let nb = c[axis] as i64 + dir;
+                if nb < 0 || nb >= dims[axis] as i64 {
+                    return None;
                 }
-            }
-            let mut na = [0.0; 3];
-            if a.is_some() {
-                for ch in 0..3 {
-                    if sum_l[ch] > 0.0 {
-                        na[ch] = (sum_la[ch] / sum_l[ch]).clamp(-1.0, 1.0);
-                    }
-                }
-            }
-            (sum_l, na)
+                let mut sc = c;
+                sc[axis] = nb as usize;
+                let src = grid.index(sc);
+                // The link is stored at the lower cell of the pair.
+                let link = if dir < 0 { src } else { n };
+                // Part index: flow along +d from a src behind (dir < 0) is "front".
+                let part = match (axis, dir) {
+                    (2, -1) => 0,
+                    (2, _) => 2,
+                    _ => 1,
+                };
+                Some((src, part, grid.link_transmittance[link][axis], grid.link_decay[link][axis]))
+            });
+            gather(links, l, &parts, iso, a)
         })
         .collect();
     out.into_iter().unzip()

@@ -40,7 +40,7 @@ use rayon::prelude::*;
 
 use super::grid::{Occluder, Rgb};
 use super::octa;
-use super::propagate::{FlowTable, PhaseTimes, Settings};
+use super::propagate::{self, FlowTable, PhaseTimes, Settings};
 use super::radial::{NONE, RadialGrid, cell_solid_angle};
 use crate::physics::hg;
 
@@ -337,49 +337,19 @@ pub fn propagate(
 /// One gathering iteration on the radial links (Eqs. 2–6 with powers). `a = None`: isotropic residuum.
 pub fn step(grid: &RadialGrid, flow: &FlowTable, p: &[Rgb], a: Option<&[Rgb]>) -> (Vec<Rgb>, Vec<Rgb>) {
     let iso = flow.lookup(0.0);
-    let parts: Vec<[[f64; 3]; 3]> = match a {
-        Some(a) => a.par_iter().map(|v| [flow.lookup(v[0]), flow.lookup(v[1]), flow.lookup(v[2])]).collect(),
-        None => Vec::new(),
-    };
+    let parts = propagate::partitions(flow, a);
     let na = grid.angular();
     let out: Vec<(Rgb, Rgb)> = (0..grid.len())
         .into_par_iter()
         .map(|c| {
             let k = c / na;
-            let mut sum_p = [0.0; 3];
-            let mut sum_pa = [0.0; 3];
-            for slot in 0..6 {
+            let links = (0..6).filter_map(|slot| {
                 let src = grid.neighbours[c][slot];
-                if src == NONE {
-                    continue;
-                }
-                let part = RadialGrid::part(slot, k);
-                let t = grid.link_transmittance[c][slot];
-                for ch in 0..3 {
-                    let ps = p[src][ch];
-                    if ps <= 0.0 || t[ch] <= 0.0 {
-                        continue;
-                    }
-                    let frac = match a {
-                        Some(_) => parts[src][ch][part],
-                        None => iso[part],
-                    };
-                    let dp = ps * t[ch] * frac;
-                    sum_p[ch] += dp;
-                    if let Some(a) = a {
-                        sum_pa[ch] += dp * a[src][ch] * grid.link_decay[c][slot][ch];
-                    }
-                }
-            }
-            let mut na_ = [0.0; 3];
-            if a.is_some() {
-                for ch in 0..3 {
-                    if sum_p[ch] > 0.0 {
-                        na_[ch] = (sum_pa[ch] / sum_p[ch]).clamp(-1.0, 1.0);
-                    }
-                }
-            }
-            (sum_p, na_)
+                (src != NONE).then(|| {
+                    (src, RadialGrid::part(slot, k), grid.link_transmittance[c][slot], grid.link_decay[c][slot])
+                })
+            });
+            propagate::gather(links, p, &parts, iso, a)
         })
         .collect();
     out.into_iter().unzip()
