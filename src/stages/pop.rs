@@ -26,13 +26,14 @@ use serde::{Deserialize, Serialize};
 
 use super::view::{self, ms};
 use super::{StageContext, StageError, StageOutcome};
+use crate::effects::pop::environment::{self, EnvMap, EnvOrdinate, OrdinateSet};
 use crate::effects::pop::grid::Grid;
 use crate::effects::pop::merge;
 use crate::effects::pop::propagate::{self, FlowTable, Observer, PhaseTimes, Settings};
 use crate::effects::pop::radial::RadialGrid;
 use crate::effects::pop::radial_propagate;
 use crate::effects::pop::render::{self, MarchOptions};
-use crate::effects::pop::scene::{self as pop_scene, BvhOccluder, RawDensity, SceneMedia};
+use crate::effects::pop::scene::{self as pop_scene, BvhOccluder, Environment, RawDensity, SceneMedia};
 use crate::effects::{Image, RgbImage, ViewCamera};
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
@@ -62,6 +63,17 @@ crate::declare_params! {
         density_raw: String = String::new(), unit = "", range = "empty or path to a .raw file";
         /// Voxels of `density_raw` along x, y, z.
         density_dims: [u32; 3] = [0, 0, 0], unit = "voxels", range = "each 1 to 1024 when density_raw is given";
+        /// Latitude-longitude HDR environment map (EXR with R, G, B; row 0 up, centre column toward +Z)
+        /// lighting the medium through principal ordinates (elek2014 Sec. 5), relative to the pipeline
+        /// file; empty: none.
+        environment: String = String::new(), unit = "", range = "empty or path to an .exr file";
+        /// Multiplier of the environment map's radiance.
+        environment_intensity: f64 = 1.0, unit = "", range = "0 to 1e6";
+        /// Principal ordinates of the environment at most (0: the preset's `ordinates`).
+        environment_ordinates: u32 = 0, unit = "directions", range = "0 to 4096";
+        /// How the ordinates' directions are chosen: "importance" (sampled from the map's luminance,
+        /// Sec. 5.1) or "fibonacci" (the preset's well-spread set).
+        environment_set: String = String::from("importance"), unit = "", range = "importance | fibonacci";
         /// Range width of the joint-bilateral upsampling relative to the largest density (0: trilinear).
         range_sigma: f64 = 0.25, unit = "", range = "0 to 100";
         /// Photons of the elek2014 Fig. 12 comparison on the unit cube (σ_s = 4, albedo 1, g = 0, 0.7,
@@ -89,8 +101,9 @@ super::view::impl_view_fields!(PopRender);
 pub struct LightRun {
     /// Light name.
     pub light: String,
-    /// `"directional"` (rectilinear grid, elek2014 Sec. 4) or `"point"` (radial grid, Sec. 6; spot and
-    /// sphere lights too).
+    /// `"directional"` (rectilinear grid, elek2014 Sec. 4), `"environment"` (one ordinate of the
+    /// environment map on its rectilinear grid, Sec. 5) or `"point"` (radial grid, Sec. 6; spot and sphere
+    /// lights too).
     pub kind: &'static str,
     /// Grid cells: (lateral, lateral, along the light), or for a radial grid (octahedral n, n, shells).
     pub grid: [usize; 3],
@@ -179,6 +192,8 @@ pub struct PopSummary {
     pub fig12: Vec<Fig12Row>,
     /// POP's scattered light against path tracing of the same view (`reference_samples > 0`).
     pub reference: Option<ReferenceComparison>,
+    /// The environment lighting (when `environment` is given).
+    pub environment: Option<EnvSummary>,
 }
 
 /// POP's scattered light against an independent path-traced image of it.
@@ -211,6 +226,25 @@ pub struct PopFrame {
     pub lights: Vec<LightRun>,
     /// Ray marching \[ms\].
     pub march_ms: f64,
+    /// The environment's ordinates and their phases (when the stage has an environment map).
+    pub environment: Option<EnvSummary>,
+}
+
+/// The environment lighting of a frame (elek2014 Sec. 5).
+#[derive(Debug, Clone, Serialize)]
+pub struct EnvSummary {
+    /// Map file.
+    pub map: String,
+    /// Map size.
+    pub size: [usize; 2],
+    /// `∫ L dω` of the map per channel \[W/m²\].
+    pub integral: [f64; 3],
+    /// The ordinates propagated (direction of travel, irradiance, initial anisotropy, cell solid angle).
+    pub ordinates: Vec<EnvOrdinate>,
+    /// Choosing the ordinates (Fig. 14 "ordinates") \[ms\].
+    pub ordinates_ms: f64,
+    /// Merging the ordinates' accumulation grids into the medium-aligned grid (Sec. 5.3) \[ms\].
+    pub merge_ms: f64,
 }
 
 /// The POP settings of a preset table for a grid (Eq. 10's switch from the medium's mean `σ_s` and `g`).
@@ -326,6 +360,18 @@ pub fn render_frame(
             gpu_passes,
         });
     }
+    let mut env_summary = None;
+    if let Some(env) = &media.environment {
+        let (f, summary) = render_environment(media, env, &occluder, table, cam, distance, &opts, &mut lights)?;
+        march_ms += f.march_ms;
+        for (s, r) in scattered.iter_mut().zip(&f.frame.radiance) {
+            for c in 0..3 {
+                s[c] += r[c];
+            }
+        }
+        transmittance = f.frame.transmittance;
+        env_summary = Some(summary);
+    }
     if !media.points.is_empty() {
         let f = render_points(media, &occluder, table, cam, distance, &opts, &mut lights)?;
         march_ms += f.march_ms;
@@ -338,7 +384,13 @@ pub fn render_frame(
     }
     let to_img =
         |v: Vec<[f64; 3]>| Image { width: w, height: h, data: v.into_iter().map(|c| c.map(|x| x as f32)).collect() };
-    Ok(PopFrame { scattered: to_img(scattered), transmittance: to_img(transmittance), lights, march_ms })
+    Ok(PopFrame {
+        scattered: to_img(scattered),
+        transmittance: to_img(transmittance),
+        lights,
+        march_ms,
+        environment: env_summary,
+    })
 }
 
 /// The point lights' part of a frame.
@@ -420,6 +472,75 @@ fn render_points(
     Ok(PointFrame { frame, march_ms: ms(t0) })
 }
 
+/// Propagates every ordinate of the environment on its own grid (CPU), merges the accumulation grids into
+/// one medium-aligned grid (Sec. 5.3) and ray-marches it.
+#[allow(clippy::too_many_arguments)]
+fn render_environment(
+    media: &SceneMedia,
+    env: &Environment,
+    occluder: &BvhOccluder<'_>,
+    table: &PopPresetTable,
+    cam: &ViewCamera,
+    distance: &[f64],
+    opts: &MarchOptions,
+    runs: &mut Vec<LightRun>,
+) -> Result<(PointFrame, EnvSummary), String> {
+    let dims = table.def.grid.map(|v| v as usize);
+    let n = if env.ordinates == 0 { table.def.ordinates as usize } else { env.ordinates };
+    let t0 = Instant::now();
+    let ords = environment::ordinates(&env.map, n, env.set);
+    let ordinates_ms = ms(t0);
+    let mut fields = Vec::with_capacity(ords.len());
+    for (k, o) in ords.iter().enumerate() {
+        let t0 = Instant::now();
+        let grid = Grid::new(&media.medium, glam::DVec3::from(o.direction), dims, occluder)?;
+        let grid_ms = ms(t0);
+        let (settings, flow) = settings_for(table, &grid);
+        let p = propagate::propagate_lobe(
+            &grid,
+            &o.light(),
+            o.anisotropy,
+            occluder,
+            &flow,
+            &settings,
+            Observer::Eye(cam.position),
+        );
+        let seeded = p.energy.first().copied().unwrap_or(0.0);
+        runs.push(LightRun {
+            light: format!("{} ordinate {k}", env.name),
+            kind: "environment",
+            grid: grid.dims,
+            cell: grid.size,
+            switch_iteration: settings.switch_iteration,
+            anisotropic_iterations: p.anisotropic_iterations,
+            isotropic_iterations: p.isotropic_iterations,
+            residual_energy: if seeded > 0.0 { p.energy.last().copied().unwrap_or(0.0) / seeded } else { 0.0 },
+            grid_ms,
+            phases_ms: p.times.into(),
+            merge_ms: 0.0,
+            device: "cpu",
+            gpu_passes: Vec::new(),
+        });
+        fields.push((grid, p.toward_eye));
+    }
+    let t0 = Instant::now();
+    let merged = Grid::medium_aligned(&media.medium, merge_dims(table))?;
+    let sources: Vec<(&Grid, &[[f64; 3]])> = fields.iter().map(|(g, f)| (g, f.as_slice())).collect();
+    let merged_field = merge::merge_rectilinear(&merged, &media.medium, &sources);
+    let merge_ms = ms(t0);
+    let t0 = Instant::now();
+    let frame = render::march(&merged, &merged_field, &media.medium, cam, Some(distance), opts);
+    let summary = EnvSummary {
+        map: env.name.clone(),
+        size: [env.map.width, env.map.height],
+        integral: env.map.integral(),
+        ordinates: ords,
+        ordinates_ms,
+        merge_ms,
+    };
+    Ok((PointFrame { frame, march_ms: ms(t0) }, summary))
+}
+
 /// `colour · transmittance (+ scattered)`.
 pub fn compose(colour: &RgbImage, frame: &PopFrame, with_scattered: bool) -> RgbImage {
     let data = colour
@@ -450,6 +571,27 @@ impl PopRender {
                 "density_dims",
                 format!("density_dims = {:?} with density_raw = \"{}\"", self.density_dims, self.density_raw),
                 "give the raw volume's voxels per axis, each 1 to 1024",
+            );
+        }
+        if !(self.environment_intensity.is_finite() && (0.0..=1e6).contains(&self.environment_intensity)) {
+            issue(
+                "environment_intensity",
+                format!("environment_intensity = {}", self.environment_intensity),
+                "use 0 to 1e6 (1 keeps the map's radiance)",
+            );
+        }
+        if self.environment_ordinates > 4096 {
+            issue(
+                "environment_ordinates",
+                format!("environment_ordinates = {}", self.environment_ordinates),
+                "use 0 (the preset's count) to 4096",
+            );
+        }
+        if self.ordinate_set().is_none() {
+            issue(
+                "environment_set",
+                format!("environment_set = \"{}\"", self.environment_set),
+                "use \"importance\" or \"fibonacci\"",
             );
         }
         if !(self.range_sigma.is_finite() && (0.0..=100.0).contains(&self.range_sigma)) {
@@ -497,7 +639,32 @@ impl PopRender {
                 .map_err(fail)?;
             Some(RawDensity { dims, values })
         };
-        pop_scene::scene_media(scene, self.voxels as usize, raw.as_ref()).map_err(fail)
+        let environment = if self.environment.is_empty() {
+            None
+        } else {
+            let path = ctx.base_dir.join(&self.environment);
+            let map = EnvMap::read_exr(&path, self.environment_intensity).map_err(|message| StageError::Input {
+                stage: id.into(),
+                message,
+                help: "give environment a latitude-longitude RGB EXR map, relative to the pipeline file".into(),
+            })?;
+            Some(Environment {
+                map,
+                name: self.environment.clone(),
+                ordinates: self.environment_ordinates as usize,
+                set: self.ordinate_set().unwrap_or(OrdinateSet::Importance),
+            })
+        };
+        pop_scene::scene_media(scene, self.voxels as usize, raw.as_ref(), environment).map_err(fail)
+    }
+
+    /// The ordinate set named by `environment_set`.
+    fn ordinate_set(&self) -> Option<OrdinateSet> {
+        match self.environment_set.as_str() {
+            "importance" => Some(OrdinateSet::Importance),
+            "fibonacci" => Some(OrdinateSet::Fibonacci),
+            _ => None,
+        }
     }
 
     /// Runs the stage.
@@ -544,6 +711,7 @@ impl PopRender {
             skipped: media.skipped.clone(),
             fig12,
             reference: self.reference(id, ctx, &table, &media, &dir, &mut outputs)?,
+            environment: frame.environment.clone(),
         };
         outputs.push(view::write_json(id, &dir.join("summary.json"), &summary)?);
         let prop_ms: f64 = frame.lights.iter().map(|l| l.phases_ms.propagation + l.phases_ms.residuum).sum();

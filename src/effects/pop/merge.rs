@@ -12,6 +12,7 @@
 use rayon::prelude::*;
 
 use super::grid::{Grid, Rgb};
+use super::medium::VoxelMedium;
 use super::radial::RadialGrid;
 use super::radial_propagate::{PointDirect, RadialPropagation};
 use super::render::{self, Frame, MarchOptions, StepSource};
@@ -19,6 +20,36 @@ use crate::effects::ViewCamera;
 
 /// Sums the radial fields into `target`'s cells (module doc).
 pub fn merge(target: &Grid, sources: &[(&RadialGrid, &[Rgb])]) -> Vec<Rgb> {
+    box_filter(target, |p| {
+        let mut sum = [0.0; 3];
+        for (grid, field) in sources {
+            let v = grid.sample(field, p);
+            for ch in 0..3 {
+                sum[ch] += v[ch];
+            }
+        }
+        sum
+    })
+}
+
+/// Sums rectilinear fields (environment ordinates' accumulation grids, each aligned with its own
+/// ordinate) into `target`'s cells: each field read trilinearly ([`render::upsample`] without the
+/// range weight) at the same `2³` points per cell.
+pub fn merge_rectilinear(target: &Grid, medium: &VoxelMedium, sources: &[(&Grid, &[Rgb])]) -> Vec<Rgb> {
+    box_filter(target, |p| {
+        let mut sum = [0.0; 3];
+        for (grid, field) in sources {
+            let v = render::upsample(grid, field, medium, p, 0.0);
+            for ch in 0..3 {
+                sum[ch] += v[ch];
+            }
+        }
+        sum
+    })
+}
+
+/// `target`'s cells: the mean of `f` at `2³` points inside each cell (a box filter).
+fn box_filter(target: &Grid, f: impl Fn(glam::DVec3) -> Rgb + Sync) -> Vec<Rgb> {
     (0..target.len())
         .into_par_iter()
         .map(|n| {
@@ -30,12 +61,9 @@ pub fn merge(target: &Grid, sources: &[(&RadialGrid, &[Rgb])]) -> Vec<Rgb> {
                     c[1] as f64 + 0.25 + 0.5 * ((corner >> 1) & 1) as f64,
                     c[2] as f64 + 0.25 + 0.5 * ((corner >> 2) & 1) as f64,
                 );
-                let p = target.world(t);
-                for (grid, field) in sources {
-                    let v = grid.sample(field, p);
-                    for ch in 0..3 {
-                        sum[ch] += v[ch] / 8.0;
-                    }
+                let v = f(target.world(t));
+                for ch in 0..3 {
+                    sum[ch] += v[ch] / 8.0;
                 }
             }
             sum
@@ -48,7 +76,7 @@ pub fn march_points(
     merged: &Grid,
     merged_toward_eye: &[Rgb],
     lights: &[(&RadialGrid, &RadialPropagation)],
-    medium: &super::medium::VoxelMedium,
+    medium: &VoxelMedium,
     camera: &ViewCamera,
     surface_distance: Option<&[f64]>,
     opts: &MarchOptions,

@@ -17,6 +17,7 @@
 //! of propagating `L_in T_i` from every cell; the phase convolution in the accumulation) is stated in
 //! [`propagate`] and in `docs/design/pop.md`.
 
+pub mod environment;
 pub mod fig12;
 pub mod grid;
 pub mod medium;
@@ -30,5 +31,7 @@ pub mod scene;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_env;
 #[cfg(test)]
 mod tests_radial;

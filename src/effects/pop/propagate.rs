@@ -231,7 +231,7 @@ fn lobe_fraction(a: f64, lo: f64, hi: f64) -> f64 {
     (hg::cdf(hi, a) - hg::cdf(lo, a)).max(0.0)
 }
 
-/// Runs the propagation.
+/// Runs the propagation of a directional light (a Dirac lobe).
 pub fn propagate(
     grid: &Grid,
     light: &DirectionalLight,
@@ -240,14 +240,34 @@ pub fn propagate(
     settings: &Settings,
     observer: Observer,
 ) -> Propagation {
+    propagate_lobe(grid, light, 1.0, occluder, flow, settings, observer)
+}
+
+/// Runs the propagation of a distant light whose incident radiance is an HG lobe of anisotropy
+/// `spread ∈ [0, 1]` about its direction (elek2014 Sec. 5.1: an environment ordinate's prefiltered
+/// initial anisotropy; `1` is a directional light). The uncollided light still travels along the
+/// grid's axis (the sweep of Sec. 4.1); what the lobe changes is how it scatters: by HG
+/// self-convolution, light of anisotropy `spread` scattered once has anisotropy `spread · g`, so the
+/// seeds start there and the uncollided light scatters toward the eye with `f_hg(u, spread · g)`.
+pub fn propagate_lobe(
+    grid: &Grid,
+    light: &DirectionalLight,
+    spread: f64,
+    occluder: &dyn Occluder,
+    flow: &FlowTable,
+    settings: &Settings,
+    observer: Observer,
+) -> Propagation {
     let start = Instant::now();
     let (uncollided, seed) = initialise(grid, light, occluder);
     let mut acc = Accumulator::new(grid, observer);
-    let g = grid.g;
+    let spread = if spread.is_finite() { spread.clamp(0.0, 1.0) } else { 1.0 };
+    // `g · 1.0 == g` exactly, so a directional light keeps its former bits.
+    let g = grid.g.map(|v| v * spread);
     let a0: Vec<Rgb> = vec![g; grid.len()];
     let init_seconds = start.elapsed().as_secs_f64();
 
-    // The uncollided Dirac lobe: toward the eye it scatters with the phase itself.
+    // The uncollided lobe: toward the eye it scatters with the phase convolved with the lobe.
     if let Observer::Eye(_) = observer {
         for (i, t) in acc.toward_eye.iter_mut().enumerate() {
             for c in 0..3 {

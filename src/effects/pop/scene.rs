@@ -51,6 +51,21 @@ pub struct SceneMedia {
     pub point_names: Vec<String>,
     /// Lights and media left out, with the reason.
     pub skipped: Vec<String>,
+    /// Environment lighting (elek2014 Sec. 5), when the stage gives a map.
+    pub environment: Option<Environment>,
+}
+
+/// An environment map and how to split it into principal ordinates.
+#[derive(Debug, Clone)]
+pub struct Environment {
+    /// The map (radiance, intensity applied).
+    pub map: super::environment::EnvMap,
+    /// Name for summaries (the file).
+    pub name: String,
+    /// Ordinates at most.
+    pub ordinates: usize,
+    /// How their directions are chosen.
+    pub set: super::environment::OrdinateSet,
 }
 
 /// A raw density volume spanning the scene's bounds (x fastest), multiplying the medium's density.
@@ -68,8 +83,13 @@ pub struct RawDensity {
 /// # Errors
 /// A message with the fix when the scene has no global medium, more than one, a back-scattering
 /// medium (`g < 0`, which POP does not propagate), no geometry to bound the medium, or no directional,
-/// point, spot or sphere light.
-pub fn scene_media(scene: &Scene, voxels: usize, raw: Option<&RawDensity>) -> Result<SceneMedia, String> {
+/// point, spot or sphere light and no `environment`.
+pub fn scene_media(
+    scene: &Scene,
+    voxels: usize,
+    raw: Option<&RawDensity>,
+    environment: Option<Environment>,
+) -> Result<SceneMedia, String> {
     let file = scene.source.display();
     let globals: Vec<_> = scene.media.iter().filter(|m| m.boundary == Boundary::Global).collect();
     let mut skipped: Vec<String> = scene
@@ -159,9 +179,10 @@ pub fn scene_media(scene: &Scene, voxels: usize, raw: Option<&RawDensity>) -> Re
         };
         skipped.extend(skip);
     }
-    if lights.is_empty() && points.is_empty() {
+    if lights.is_empty() && points.is_empty() && environment.is_none() {
         return Err(format!(
-            "{file} has no directional, point, spot or sphere light; POP propagates light from those (add one)"
+            "{file} has no directional, point, spot or sphere light and the stage no environment map; POP \
+             propagates light from those (add one)"
         ));
     }
     let coefficients = (m.sigma_s, m.sigma_a, m.g.map(|g| g.min(0.999_999)));
@@ -185,7 +206,16 @@ pub fn scene_media(scene: &Scene, voxels: usize, raw: Option<&RawDensity>) -> Re
             })?
         }
     };
-    Ok(SceneMedia { medium, medium_name: m.name.clone(), lights, light_names, points, point_names, skipped })
+    Ok(SceneMedia {
+        medium,
+        medium_name: m.name.clone(),
+        lights,
+        light_names,
+        points,
+        point_names,
+        skipped,
+        environment,
+    })
 }
 
 /// The scene an independent path tracer must render to give exactly what POP's `scattered` layer

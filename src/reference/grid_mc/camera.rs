@@ -1,4 +1,4 @@
-//! Camera path tracing with next-event estimation toward the directional light.
+//! Camera path tracing with next-event estimation toward the directional light or an environment map.
 
 use std::time::Instant;
 
@@ -8,6 +8,9 @@ use rayon::prelude::*;
 use super::grid::{Voxels, rotate};
 use super::{CameraOptions, ReferenceImage, Walk, light_dir, roulette, seed_hash, walks};
 use crate::effects::ViewCamera;
+use crate::effects::pop::environment::{EnvMap, EnvSampler};
+use crate::effects::pop::grid::Rgb;
+use crate::effects::pop::grid::{NoOccluder, Occluder};
 use crate::effects::pop::medium::{DirectionalLight, VoxelMedium};
 use crate::physics::hg::{phase, sample_mu};
 use crate::physics::rng::{Draws, SampleStream, StreamKey};
@@ -22,23 +25,46 @@ struct Pixel {
     truncated: u64,
 }
 
+/// Where next-event estimation connects.
+enum Lighting<'a> {
+    /// Toward a directional light travelling along this unit direction.
+    Directional(DVec3),
+    /// Toward a direction drawn from the map's importance sampler.
+    Environment(&'a EnvMap, EnvSampler),
+}
+
 struct Setup<'a> {
     vox: Voxels<'a>,
     walks: Vec<Walk>,
     sigma_t: [f64; 3],
-    dir: Option<DVec3>,
+    lighting: Option<Lighting<'a>>,
+    occluder: &'a dyn Occluder,
     key: u64,
     opts: CameraOptions,
 }
 
 impl Setup<'_> {
-    /// One path of `walk` from `o` along `d`: (radiance per unit irradiance, its once-scattered
-    /// part, whether `max_events` cut it with weight left).
-    fn path(&self, walk: &Walk, light: DVec3, o: DVec3, d: DVec3, mut dr: Draws) -> (f64, f64, bool) {
-        let (mut p, mut d) = (o, d);
-        let (mut beta, mut total, mut single) = (1.0, 0.0, 0.0);
+    /// One path of `walk` from `o` along `d`, ending at the first surface (black) or `far` for the
+    /// first flight: (radiance per channel per unit `e` of the walk, its once-scattered part, whether
+    /// `max_events` cut it with weight left). The caller multiplies by the walk's `e`.
+    fn path(
+        &self,
+        walk: &Walk,
+        lighting: &Lighting<'_>,
+        o: DVec3,
+        d: DVec3,
+        far: f64,
+        mut dr: Draws,
+    ) -> (Rgb, Rgb, bool) {
+        let (mut p, mut d, mut far) = (o, d, far);
+        let mut beta = 1.0;
+        let (mut total, mut single) = ([0.0; 3], [0.0; 3]);
         let mut events = 0u32;
         while let Some((t0, t1)) = self.vox.clip(p, d, 0.0) {
+            let t1 = t1.min(far);
+            if t1 <= t0 {
+                break;
+            }
             let xi = dr.draw();
             let target = if walk.sigma_t > 0.0 { -(-xi).ln_1p() / walk.sigma_t } else { f64::INFINITY };
             let Some(t) = self.vox.invert(p, d, t0, t1, target) else { break };
@@ -48,9 +74,31 @@ impl Setup<'_> {
             }
             events += 1;
             let albedo = walk.albedo();
-            let shadow = (-walk.sigma_t * self.vox.density_to_exit(p, -light)).exp();
-            let nee = beta * albedo * phase(light.dot(-d), walk.g) * shadow;
-            total += nee;
+            let nee = match lighting {
+                Lighting::Directional(light) => {
+                    let shadow = if self.occluder.ray_blocked(p, -*light) {
+                        0.0
+                    } else {
+                        (-walk.sigma_t * self.vox.density_to_exit(p, -*light)).exp()
+                    };
+                    [beta * albedo * phase(light.dot(-d), walk.g) * shadow; 3]
+                }
+                Lighting::Environment(env, sampler) => {
+                    let (w, pdf) = sampler.sample(dr.draw(), dr.draw(), dr.draw());
+                    if pdf > 0.0 && !self.occluder.ray_blocked(p, w) {
+                        let shadow = (-walk.sigma_t * self.vox.density_to_exit(p, w)).exp();
+                        // Light arrives travelling along −w and leaves toward the eye along −d.
+                        let f = beta * albedo * phase(w.dot(d), walk.g) * shadow / pdf;
+                        let l = env.lookup(w);
+                        l.map(|v| f * v)
+                    } else {
+                        [0.0; 3]
+                    }
+                }
+            };
+            for c in 0..3 {
+                total[c] += nee[c];
+            }
             if events == 1 {
                 single = nee;
             }
@@ -63,15 +111,28 @@ impl Setup<'_> {
                 None => break,
             }
             d = rotate(d, sample_mu(dr.draw(), walk.g), dr.draw());
+            far = self.occluder.hit_distance(p, d);
         }
         (total, single, false)
     }
 
-    fn pixel(&self, camera: &ViewCamera, i: usize) -> Pixel {
+    fn pixel(&self, camera: &ViewCamera, surface: Option<&[f64]>, i: usize) -> Pixel {
         let (x, y) = (i % camera.width, i / camera.width);
         let o = camera.position;
         let d = camera.pixel_dir(x, y);
-        let depth = if d.is_finite() { self.vox.density_to_exit(o, d) } else { 0.0 };
+        let far = match surface {
+            Some(s) => s.get(i).copied().unwrap_or(f64::INFINITY),
+            None if d.is_finite() => self.occluder.hit_distance(o, d),
+            None => 0.0,
+        };
+        let depth = if d.is_finite() {
+            self.vox.clip(o, d, 0.0).map_or(0.0, |(t0, t1)| {
+                let t1 = t1.min(far);
+                if t1 > t0 { self.vox.density_integral(o, d, t0, t1) } else { 0.0 }
+            })
+        } else {
+            0.0
+        };
         let transmittance = self.sigma_t.map(|s| (-s * depth).exp());
         let mut px = Pixel {
             radiance: [0.0; 3],
@@ -81,7 +142,7 @@ impl Setup<'_> {
             transmittance,
             truncated: 0,
         };
-        let Some(light) = self.dir else { return px };
+        let Some(lighting) = &self.lighting else { return px };
         if !d.is_finite() || self.opts.samples == 0 {
             return px;
         }
@@ -91,11 +152,11 @@ impl Setup<'_> {
             let stream: SampleStream = key.sample(u64::from(s));
             let (mut v, mut v1) = ([0.0; 3], [0.0; 3]);
             for walk in &self.walks {
-                let (l, l1, cut) = self.path(walk, light, o, d, Draws::new(stream));
+                let (l, l1, cut) = self.path(walk, lighting, o, d, far, Draws::new(stream));
                 px.truncated += u64::from(cut);
-                for ((a, b), e) in v.iter_mut().zip(v1.iter_mut()).zip(walk.e) {
-                    *a += l * e;
-                    *b += l1 * e;
+                for c in 0..3 {
+                    v[c] += l[c] * walk.e[c];
+                    v1[c] += l1[c] * walk.e[c];
                 }
             }
             let n = f64::from(s + 1);
@@ -127,18 +188,46 @@ pub fn render(
     camera: &ViewCamera,
     opts: &CameraOptions,
 ) -> ReferenceImage {
-    let start = Instant::now();
-    let walks = walks(medium, light);
     let setup = Setup {
         vox: Voxels::new(medium),
         sigma_t: [0, 1, 2].map(|c| medium.sigma_s[c] + medium.sigma_a[c]),
-        walks,
-        dir: light_dir(light),
+        walks: walks(medium, light),
+        lighting: light_dir(light).map(Lighting::Directional),
+        occluder: &NoOccluder,
         key: seed_hash(opts.seed, 0x6772_6964_5f6d_6332), // "grid_mc2"
         opts: *opts,
     };
+    run(&setup, camera, None)
+}
+
+/// Renders `medium` lit by the environment map `env` from `camera`, with the opaque, black surfaces
+/// of `occluder` (module doc, "Environment"). `surface_distance` (per pixel, `INFINITY` where the ray
+/// escapes; `None`: asked of `occluder`) ends the eye ray. Bit-identical for any pool size.
+pub fn render_environment(
+    medium: &VoxelMedium,
+    env: &EnvMap,
+    occluder: &dyn Occluder,
+    camera: &ViewCamera,
+    surface_distance: Option<&[f64]>,
+    opts: &CameraOptions,
+) -> ReferenceImage {
+    let unit = DirectionalLight { direction: DVec3::X, irradiance: [1.0; 3] };
+    let setup = Setup {
+        vox: Voxels::new(medium),
+        sigma_t: [0, 1, 2].map(|c| medium.sigma_s[c] + medium.sigma_a[c]),
+        walks: walks(medium, &unit),
+        lighting: Some(Lighting::Environment(env, EnvSampler::new(env))),
+        occluder,
+        key: seed_hash(opts.seed, 0x6772_6964_5f65_6e76), // "grid_env"
+        opts: *opts,
+    };
+    run(&setup, camera, surface_distance)
+}
+
+fn run(setup: &Setup<'_>, camera: &ViewCamera, surface: Option<&[f64]>) -> ReferenceImage {
+    let start = Instant::now();
     let n = camera.width.checked_mul(camera.height).unwrap_or(0);
-    let pixels: Vec<Pixel> = (0..n).into_par_iter().map(|i| setup.pixel(camera, i)).collect();
+    let pixels: Vec<Pixel> = (0..n).into_par_iter().map(|i| setup.pixel(camera, surface, i)).collect();
     ReferenceImage {
         width: if n == 0 { 0 } else { camera.width },
         height: if n == 0 { 0 } else { camera.height },
@@ -148,7 +237,7 @@ pub fn render(
         single_variance: pixels.iter().map(|p| p.single_variance).collect(),
         transmittance: pixels.iter().map(|p| p.transmittance).collect(),
         seconds: start.elapsed().as_secs_f64(),
-        samples: opts.samples,
+        samples: setup.opts.samples,
         walks: setup.walks.len() as u32,
         truncated_paths: pixels.iter().map(|p| p.truncated).sum(),
     }

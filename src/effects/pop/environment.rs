@@ -1,0 +1,375 @@
+//! Environment lighting for POP (elek2014 Sec. 5.1): a latitude–longitude HDR map → principal ordinates,
+//! each a distant light with its share of the map's energy and a prefiltered initial anisotropy.
+//!
+//! **Input → output.** An [`EnvMap`] (radiance per texel, read from an EXR or built from a function),
+//! an ordinate count `N` and a direction set ([`OrdinateSet`]) → [`EnvOrdinate`]s: the direction the
+//! light of ordinate `n` travels, its irradiance `E_n = ∫_{Ω_n} L dω` (per channel) and the initial
+//! anisotropy `a_n` of its HG lobe. [`propagate_lobe`](super::propagate::propagate_lobe) propagates each
+//! as a directional light on its own grid, and [`merge`](super::merge) combines the grids (Sec. 5.3).
+//!
+//! **Map convention.** Row 0 is the top. Texel `(col, row)` covers polar angles
+//! `θ ∈ [π row/H, π (row+1)/H]` from `+Y` (up) and azimuths `φ ∈ [2π col/W, 2π (col+1)/W]`, with the
+//! direction `ω = (sin θ sin φ, cos θ, −sin θ cos φ)`: the image centre column looks toward `+Z`, its
+//! left edge toward `−Z`, a quarter across toward `+X`. A texel's solid angle is exact,
+//! `ΔΩ = (2π/W)(cos θ₀ − cos θ₁)`, so `Σ ΔΩ = 4π` to rounding. `ω` is the direction *toward* the
+//! environment (where light comes from).
+//!
+//! **Ordinates (Sec. 5.1).** [`OrdinateSet::Importance`] places the `N` directions where the map is
+//! bright: the points `((i + ½)/m, frac(i/Φ))` of a two-dimensional Fibonacci lattice pushed through the
+//! inverse of the map's texel distribution ([`EnvSampler`], luminance × solid angle with a uniform
+//! share so dark regions still get ordinates), one ordinate per texel (lattices of `m = N, 2N, 4N, …`
+//! points until `N` distinct texels are found: a sun smaller than `N` texels would otherwise swallow
+//! most of the points); [`OrdinateSet::Fibonacci`] uses the preset's
+//! well-spread spherical Fibonacci set. Every texel then goes to its nearest ordinate (its Voronoi
+//! cell `Ω_n`, at texel resolution), so the ordinates' energies sum to the map's integral exactly.
+//! *Departure:* the paper approximates the mean cosine of `Ω_n` from the sampling importance with the
+//! heuristic `a_n = (1 − w_n/N)^β`, because it does not know the cells. voltab knows them, so it
+//! computes what the heuristic stands for: the radiance-weighted mean direction of the cell,
+//! `m_n = Σ_{t∈Ω_n} Y_t ∫_t ω dω / Σ Y_t ΔΩ_t` (`Y` the luminance, the texel integral exact,
+//! [`EnvMap::texel_moment`]); the ordinate points along
+//! `m_n/|m_n|` and starts with anisotropy `a_n = |m_n|` (the HG lobe with that mean cosine), no tuning
+//! of `β`. A cell holding one bright texel (a sun) gets `a_n → 1`, a cell of uniform sky a value near
+//! the preset's `ordinate_mean_cosine`. Ordinates whose cell carries no energy are left out.
+//!
+//! **Not implemented.** The importance propagation from the camera (Sec. 5.2): the preset's
+//! `importance` settings are not used yet; the ordinates follow the map alone.
+
+use std::path::Path;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::grid::Rgb;
+use super::medium::DirectionalLight;
+use crate::tables::pop_preset::ordinates::fibonacci_directions;
+
+/// Largest map side accepted (a 16k × 8k float map is 1.5 GiB as f64 RGB).
+pub const MAX_SIDE: usize = 16_384;
+
+/// Rec. 709 luminance weights, the importance of a texel's radiance.
+const LUMINANCE: Rgb = [0.2126, 0.7152, 0.0722];
+
+/// Share of [`EnvSampler`]'s probability spread uniformly over the sphere.
+const UNIFORM_SHARE: f64 = 0.1;
+
+/// `1/Φ` (Φ the golden ratio): the second coordinate of the Fibonacci lattice.
+const INV_PHI: f64 = 0.618_033_988_749_894_8;
+
+/// Luminance of an RGB radiance.
+pub fn luminance(v: Rgb) -> f64 {
+    LUMINANCE[0] * v[0] + LUMINANCE[1] * v[1] + LUMINANCE[2] * v[2]
+}
+
+/// A latitude–longitude environment map of radiance \[W/(m² sr)\] (module doc for the convention).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvMap {
+    /// Texels per row (azimuth).
+    pub width: usize,
+    /// Rows (polar angle, top = up).
+    pub height: usize,
+    /// Radiance per texel, row-major from the top-left.
+    pub radiance: Vec<Rgb>,
+}
+
+impl EnvMap {
+    /// A map from its texels. Errors: a side outside `1..=`[`MAX_SIDE`], a wrong length, a negative,
+    /// NaN or infinite radiance (naming the first texel).
+    pub fn new(width: usize, height: usize, radiance: Vec<Rgb>) -> Result<Self, String> {
+        if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
+            return Err(format!("environment map is {width} × {height}; each side must be 1 to {MAX_SIDE}"));
+        }
+        if radiance.len() != width * height {
+            return Err(format!(
+                "environment map has {} texels, {width} × {height} needs {}",
+                radiance.len(),
+                width * height
+            ));
+        }
+        if let Some(i) = radiance.iter().position(|v| v.iter().any(|c| !c.is_finite() || *c < 0.0)) {
+            return Err(format!(
+                "environment texel (column {}, row {}) is {:?}; radiance must be finite and non-negative",
+                i % width,
+                i / width,
+                radiance[i]
+            ));
+        }
+        Ok(Self { width, height, radiance })
+    }
+
+    /// A map whose texels hold `f` at their centre directions.
+    pub fn from_fn(width: usize, height: usize, f: impl Fn(DVec3) -> Rgb + Sync) -> Result<Self, String> {
+        let dirs: Vec<DVec3> = (0..width * height)
+            .map(|i| direction((i % width) as f64 + 0.5, (i / width) as f64 + 0.5, width, height))
+            .collect();
+        Self::new(width, height, dirs.par_iter().map(|&d| f(d)).collect())
+    }
+
+    /// Reads the `R`, `G`, `B` channels of an EXR file, scaled by `intensity`. Errors name the file.
+    pub fn read_exr(path: &Path, intensity: f64) -> Result<Self, String> {
+        let image = crate::image_io::read_exr_rgb(path).map_err(|e| e.to_string())?;
+        let rgb = image.rgb(None).ok_or_else(|| {
+            format!(
+                "{}: the environment map has no R, G, B channels (it has {:?})",
+                path.display(),
+                image.channels.keys()
+            )
+        })?;
+        let radiance = rgb.iter().map(|p| p.map(|c| f64::from(c) * intensity)).collect();
+        Self::new(image.width, image.height, radiance).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    /// Centre direction of texel `(col, row)`.
+    pub fn texel_direction(&self, col: usize, row: usize) -> DVec3 {
+        direction(col as f64 + 0.5, row as f64 + 0.5, self.width, self.height)
+    }
+
+    /// Exact solid angle of a texel in `row` \[sr\].
+    pub fn texel_solid_angle(&self, row: usize) -> f64 {
+        let h = self.height as f64;
+        let (t0, t1) = (std::f64::consts::PI * row as f64 / h, std::f64::consts::PI * (row + 1) as f64 / h);
+        std::f64::consts::TAU / self.width as f64 * (t0.cos() - t1.cos())
+    }
+
+    /// `∫ ω dω` over texel `(col, row)` (exact): its length over the solid angle is the mean cosine of
+    /// the texel's directions about their mean direction (→ 1 for small texels, 0 for a 1 × 1 map).
+    pub fn texel_moment(&self, col: usize, row: usize) -> DVec3 {
+        let (h, w) = (self.height as f64, self.width as f64);
+        let (t0, t1) = (std::f64::consts::PI * row as f64 / h, std::f64::consts::PI * (row + 1) as f64 / h);
+        let (p0, p1) = (std::f64::consts::TAU * col as f64 / w, std::f64::consts::TAU * (col + 1) as f64 / w);
+        // ∫ sin²θ dθ and ∫ cos θ sin θ dθ over the row; ∫ (sin φ, −cos φ) dφ over the column.
+        let s2 = 0.5 * (t1 - t0) - 0.25 * ((2.0 * t1).sin() - (2.0 * t0).sin());
+        let cs = 0.5 * (t1.sin().powi(2) - t0.sin().powi(2));
+        let dphi = p1 - p0;
+        DVec3::new(s2 * (p0.cos() - p1.cos()), dphi * cs, -s2 * (p1.sin() - p0.sin()))
+    }
+
+    /// The texel containing unit direction `w` (toward the environment).
+    pub fn texel_of(&self, w: DVec3) -> (usize, usize) {
+        let theta = w.y.clamp(-1.0, 1.0).acos();
+        let mut phi = w.x.atan2(-w.z);
+        if phi < 0.0 {
+            phi += std::f64::consts::TAU;
+        }
+        let col = ((phi / std::f64::consts::TAU * self.width as f64) as usize).min(self.width - 1);
+        let row = ((theta / std::f64::consts::PI * self.height as f64) as usize).min(self.height - 1);
+        (col, row)
+    }
+
+    /// Radiance arriving from unit direction `w` (nearest texel).
+    pub fn lookup(&self, w: DVec3) -> Rgb {
+        let (c, r) = self.texel_of(w);
+        self.radiance[r * self.width + c]
+    }
+
+    /// `∫ L dω` over the sphere per channel (the irradiance a sphere's cross-section receives per unit
+    /// area, times 4: the scalar fluence in empty space) \[W/m²\].
+    pub fn integral(&self) -> Rgb {
+        let mut sum = [0.0; 3];
+        for row in 0..self.height {
+            let omega = self.texel_solid_angle(row);
+            for v in &self.radiance[row * self.width..(row + 1) * self.width] {
+                for c in 0..3 {
+                    sum[c] += v[c] * omega;
+                }
+            }
+        }
+        sum
+    }
+}
+
+/// Direction at fractional texel coordinates (`x ∈ [0, W]`, `y ∈ [0, H]`).
+fn direction(x: f64, y: f64, width: usize, height: usize) -> DVec3 {
+    let theta = std::f64::consts::PI * y / height as f64;
+    let phi = std::f64::consts::TAU * x / width as f64;
+    let (st, ct) = theta.sin_cos();
+    let (sp, cp) = phi.sin_cos();
+    DVec3::new(st * sp, ct, -st * cp)
+}
+
+/// Importance sampling of directions from an [`EnvMap`]: a texel with probability
+/// `∝ (1 − s) Y_t ΔΩ_t / Σ Y ΔΩ + s ΔΩ_t/4π` (`s` = 10 %: a uniform share, so every direction has a
+/// positive density), then a direction uniform in solid angle inside the texel. The density per
+/// steradian is `p_t/ΔΩ_t`.
+#[derive(Debug, Clone)]
+pub struct EnvSampler {
+    /// Cumulative texel probabilities (row-major), last = 1.
+    cdf: Vec<f64>,
+    /// Texel probabilities.
+    p: Vec<f64>,
+    width: usize,
+    height: usize,
+}
+
+impl EnvSampler {
+    /// The sampler of `env`.
+    pub fn new(env: &EnvMap) -> Self {
+        let (w, h) = (env.width, env.height);
+        let weights: Vec<f64> =
+            (0..w * h).map(|i| luminance(env.radiance[i]).max(0.0) * env.texel_solid_angle(i / w)).collect();
+        let total: f64 = weights.iter().sum();
+        let four_pi = 4.0 * std::f64::consts::PI;
+        let share = if total > 0.0 { UNIFORM_SHARE } else { 1.0 };
+        let p: Vec<f64> = weights
+            .iter()
+            .enumerate()
+            .map(|(i, &wt)| {
+                let lum = if total > 0.0 { wt / total } else { 0.0 };
+                (1.0 - share) * lum + share * env.texel_solid_angle(i / w) / four_pi
+            })
+            .collect();
+        let mut cdf = Vec::with_capacity(p.len());
+        let mut acc = 0.0;
+        for v in &p {
+            acc += v;
+            cdf.push(acc);
+        }
+        let last = acc;
+        for v in &mut cdf {
+            *v /= last;
+        }
+        Self { cdf, p: p.iter().map(|v| v / last).collect(), width: w, height: h }
+    }
+
+    /// A direction for the uniform numbers `(u1, u2, u3)` in `[0, 1)` and its density per steradian.
+    pub fn sample(&self, u1: f64, u2: f64, u3: f64) -> (DVec3, f64) {
+        let t = self.cdf.partition_point(|&c| c <= u1).min(self.cdf.len() - 1);
+        let (col, row) = (t % self.width, t / self.width);
+        let h = self.height as f64;
+        let (c0, c1) =
+            ((std::f64::consts::PI * row as f64 / h).cos(), (std::f64::consts::PI * (row + 1) as f64 / h).cos());
+        // Uniform in solid angle: cos θ uniform between the row's edges, φ uniform in the column.
+        let ct = c0 + (c1 - c0) * u2;
+        let st = (1.0 - ct * ct).max(0.0).sqrt();
+        let phi = std::f64::consts::TAU * (col as f64 + u3) / self.width as f64;
+        let (sp, cp) = phi.sin_cos();
+        let omega = std::f64::consts::TAU / self.width as f64 * (c0 - c1);
+        (DVec3::new(st * sp, ct, -st * cp), self.p[t] / omega)
+    }
+
+    /// The texel index of lattice point `(u1, u2)` (for ordinate placement).
+    fn texel(&self, u1: f64) -> usize {
+        self.cdf.partition_point(|&c| c <= u1).min(self.cdf.len() - 1)
+    }
+}
+
+/// How the ordinates' directions are chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum OrdinateSet {
+    /// Importance-sampled from the map's luminance (elek2014 Sec. 5.1).
+    Importance,
+    /// The preset's spherical Fibonacci directions (well spread, independent of the map).
+    Fibonacci,
+}
+
+/// One principal ordinate of an environment: a distant light with a prefiltered lobe.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct EnvOrdinate {
+    /// Unit direction the light travels (from the environment into the scene).
+    pub direction: [f64; 3],
+    /// `∫_{Ω_n} L dω` per channel \[W/m²\].
+    pub irradiance: Rgb,
+    /// Initial anisotropy `a_n` (radiance-weighted mean cosine of the cell about `direction`).
+    pub anisotropy: f64,
+    /// Solid angle of the cell \[sr\].
+    pub solid_angle: f64,
+}
+
+impl EnvOrdinate {
+    /// The ordinate as a directional light (its anisotropy goes to `propagate_lobe` separately).
+    pub fn light(&self) -> DirectionalLight {
+        DirectionalLight { direction: DVec3::from(self.direction), irradiance: self.irradiance }
+    }
+}
+
+/// The candidate directions (toward the environment) of `set`.
+fn candidates(env: &EnvMap, n: usize, set: OrdinateSet) -> Vec<DVec3> {
+    match set {
+        OrdinateSet::Fibonacci => fibonacci_directions(n).into_iter().map(DVec3::from).collect(),
+        OrdinateSet::Importance => {
+            let sampler = EnvSampler::new(env);
+            let mut taken = std::collections::BTreeSet::new();
+            let mut out = Vec::with_capacity(n);
+            // Lattices of N, 2N, 4N, … points until N distinct texels are found (two points in one
+            // texel would split one texel's light), at most 64N points.
+            let mut m = n;
+            while out.len() < n && m <= 64 * n {
+                for i in 0..m {
+                    let u1 = (i as f64 + 0.5) / m as f64;
+                    let u2 = (i as f64 * INV_PHI).fract();
+                    let t = sampler.texel(u1);
+                    if out.len() < n && taken.insert(t) {
+                        // The lattice's second coordinate places the point inside its texel.
+                        let (col, row) = (t % env.width, t / env.width);
+                        out.push(direction(col as f64 + u2, row as f64 + 0.5, env.width, env.height));
+                    }
+                }
+                m *= 2;
+            }
+            out
+        }
+    }
+}
+
+/// The principal ordinates of `env` (module doc): at most `n`, those with energy, in a fixed order.
+pub fn ordinates(env: &EnvMap, n: usize, set: OrdinateSet) -> Vec<EnvOrdinate> {
+    let dirs = candidates(env, n.max(1), set);
+    let w = env.width;
+    // Nearest ordinate of every texel (largest cosine; ties to the lower index), per row in parallel.
+    let owner: Vec<usize> = (0..w * env.height)
+        .into_par_iter()
+        .map(|t| {
+            let d = env.texel_direction(t % w, t / w);
+            let mut best = (0, f64::NEG_INFINITY);
+            for (k, o) in dirs.iter().enumerate() {
+                let c = o.dot(d);
+                if c > best.1 {
+                    best = (k, c);
+                }
+            }
+            best.0
+        })
+        .collect();
+    let mut energy = vec![[0.0; 3]; dirs.len()];
+    let mut moment = vec![DVec3::ZERO; dirs.len()];
+    let mut weight = vec![0.0; dirs.len()];
+    let mut omega = vec![0.0; dirs.len()];
+    for (t, &k) in owner.iter().enumerate() {
+        let (col, row) = (t % w, t / w);
+        let dw = env.texel_solid_angle(row);
+        let l = env.radiance[t];
+        for c in 0..3 {
+            energy[k][c] += l[c] * dw;
+        }
+        let y = luminance(l);
+        moment[k] += env.texel_moment(col, row) * y;
+        weight[k] += y * dw;
+        omega[k] += dw;
+    }
+    (0..dirs.len())
+        .filter(|&k| energy[k].iter().any(|&e| e > 0.0))
+        .map(|k| {
+            // A cell with energy but no luminance (pure negative-weight colours cannot occur: radiance
+            // is non-negative) falls back to its candidate direction and an isotropic start.
+            let (dir, a) = if weight[k] > 0.0 && moment[k].length() > 0.0 {
+                (moment[k].normalize(), (moment[k].length() / weight[k]).min(1.0))
+            } else {
+                (dirs[k], 0.0)
+            };
+            EnvOrdinate { direction: (-dir).to_array(), irradiance: energy[k], anisotropy: a, solid_angle: omega[k] }
+        })
+        .collect()
+}
+
+/// A sky for the bundled scenes and the tests: a horizon-to-zenith gradient above, a dim ground below
+/// and a sun disk of angular radius `sun_radius` toward `sun` (unit, toward the sun) with radiance
+/// `sun_radiance`. Pure function of its arguments.
+pub fn procedural_sky(w: DVec3, sun: DVec3, sun_radius: f64, sun_radiance: Rgb) -> Rgb {
+    let up = w.y;
+    let sky = if up >= 0.0 {
+        let t = up.sqrt();
+        [0.55 + (0.18 - 0.55) * t, 0.65 + (0.32 - 0.65) * t, 0.80 + (0.62 - 0.80) * t]
+    } else {
+        [0.10, 0.09, 0.08]
+    };
+    if w.dot(sun) >= sun_radius.cos() { sun_radiance } else { sky }
+}
