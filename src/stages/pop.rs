@@ -526,7 +526,7 @@ fn render_environment(
     let t0 = Instant::now();
     let merged = Grid::medium_aligned(&media.medium, merge_dims(table))?;
     let sources: Vec<(&Grid, &[[f64; 3]])> = fields.iter().map(|(g, f)| (g, f.as_slice())).collect();
-    let merged_field = merge::merge_rectilinear(&merged, &media.medium, &sources);
+    let merged_field = merge::merge_rectilinear(&merged, &sources);
     let merge_ms = ms(t0);
     let t0 = Instant::now();
     let frame = render::march(&merged, &merged_field, &media.medium, cam, Some(distance), opts);
@@ -786,7 +786,10 @@ impl PopRender {
 
 /// Path-traces `scene`'s scattered light as POP sees it ([`pop_scene::scattering_reference_scene`]) from
 /// `cam` with `samples` paths per pixel and compares `pop` with it; returns the comparison (POP time 0)
-/// and the reference image.
+/// and the reference image. The environment's part (when the stage has one) comes from
+/// [`crate::reference::grid_mc::render_environment`] on POP's voxel medium with the scene's surfaces as
+/// black occluders, and is added to the lights' part (the scattered light is linear in the sources;
+/// the two estimates are independent, so their variances add).
 pub fn compare_with_reference(
     scene: &Scene,
     media: &SceneMedia,
@@ -794,14 +797,45 @@ pub fn compare_with_reference(
     pop: &RgbImage,
     samples: u32,
 ) -> (ReferenceComparison, RgbImage) {
-    let ref_scene = pop_scene::scattering_reference_scene(scene, media);
-    let bvh = SceneBvh::build(&ref_scene);
     let t0 = Instant::now();
-    let (img, _, noise) = view::path_trace(&ref_scene, &bvh, cam, samples, 256, true);
+    let n = cam.width * cam.height;
+    let mut mean = vec![[0.0f64; 3]; n];
+    let mut variance_sum = 0.0;
+    if !media.lights.is_empty() || !media.points.is_empty() {
+        let ref_scene = pop_scene::scattering_reference_scene(scene, media);
+        let bvh = SceneBvh::build(&ref_scene);
+        let (img, _, noise) = view::path_trace(&ref_scene, &bvh, cam, samples, 256, true);
+        let sq: f64 = img.data.iter().map(|c| c.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>()).sum();
+        variance_sum += noise * noise * sq;
+        for (m, v) in mean.iter_mut().zip(&img.data) {
+            *m = v.map(f64::from);
+        }
+    }
+    if let Some(env) = &media.environment {
+        let bvh = SceneBvh::build(scene);
+        let opts = crate::reference::grid_mc::CameraOptions { samples, seed: 0xe7e, max_events: 100_000 };
+        let r = crate::reference::grid_mc::render_environment(
+            &media.medium,
+            &env.map,
+            &BvhOccluder(&bvh),
+            cam,
+            None,
+            &opts,
+        );
+        for ((m, v), var) in mean.iter_mut().zip(&r.radiance).zip(&r.variance) {
+            for c in 0..3 {
+                m[c] += v[c];
+                variance_sum += var[c];
+            }
+        }
+    }
     let ref_ms = ms(t0);
+    let img = Image { width: cam.width, height: cam.height, data: mean.iter().map(|v| v.map(|x| x as f32)).collect() };
     let error = crate::effects::rel_rmse(pop, &img);
     let sum = |i: &RgbImage| i.data.iter().map(|c| c.iter().map(|&v| f64::from(v)).sum::<f64>()).sum::<f64>();
     let r = sum(&img);
+    let sq: f64 = mean.iter().map(|c| c.iter().map(|v| v * v).sum::<f64>()).sum();
+    let noise = if sq > 0.0 { (variance_sum / sq).sqrt() } else { 0.0 };
     let c = ReferenceComparison {
         size: [cam.width, cam.height],
         samples,

@@ -360,16 +360,30 @@ pub fn ordinates(env: &EnvMap, n: usize, set: OrdinateSet) -> Vec<EnvOrdinate> {
         .collect()
 }
 
-/// A sky for the bundled scenes and the tests: a horizon-to-zenith gradient above, a dim ground below
-/// and a sun disk of angular radius `sun_radius` toward `sun` (unit, toward the sun) with radiance
-/// `sun_radiance`. Pure function of its arguments.
-pub fn procedural_sky(w: DVec3, sun: DVec3, sun_radius: f64, sun_radiance: Rgb) -> Rgb {
-    let up = w.y;
-    let sky = if up >= 0.0 {
-        let t = up.sqrt();
+/// A sky for the bundled scenes and the tests: a horizon-to-zenith gradient above (`√up` blend from a pale
+/// horizon to a deeper zenith blue), a dim ground below and, when given, a sun disk `(toward the sun,
+/// angular radius, radiance)`. Relative units (the bundled `scenes/sky.exr` is this without a sun at
+/// 128 × 64; the pipeline scales it with `environment_intensity`). Pure function of its arguments.
+pub fn procedural_sky(w: DVec3, sun: Option<(DVec3, f64, Rgb)>) -> Rgb {
+    if let Some((dir, radius, radiance)) = sun
+        && w.dot(dir) >= radius.cos()
+    {
+        return radiance;
+    }
+    if w.y >= 0.0 {
+        let t = w.y.sqrt();
         [0.55 + (0.18 - 0.55) * t, 0.65 + (0.32 - 0.65) * t, 0.80 + (0.62 - 0.80) * t]
     } else {
         [0.10, 0.09, 0.08]
-    };
-    if w.dot(sun) >= sun_radius.cos() { sun_radiance } else { sky }
+    }
+}
+
+/// The bundled sky map's size.
+pub const BUNDLED_SKY_SIZE: [usize; 2] = [128, 64];
+
+/// The bundled sky map (`scenes/sky.exr`): [`procedural_sky`] without a sun at [`BUNDLED_SKY_SIZE`].
+pub fn bundled_sky() -> EnvMap {
+    let [w, h] = BUNDLED_SKY_SIZE;
+    // Cannot fail: the sizes are in range and the values finite and non-negative.
+    EnvMap::from_fn(w, h, |d| procedural_sky(d, None)).expect("the bundled sky is a valid map")
 }

@@ -33,19 +33,45 @@ pub fn merge(target: &Grid, sources: &[(&RadialGrid, &[Rgb])]) -> Vec<Rgb> {
 }
 
 /// Sums rectilinear fields (environment ordinates' accumulation grids, each aligned with its own
-/// ordinate) into `target`'s cells: each field read trilinearly ([`render::upsample`] without the
-/// range weight) at the same `2³` points per cell.
-pub fn merge_rectilinear(target: &Grid, medium: &VoxelMedium, sources: &[(&Grid, &[Rgb])]) -> Vec<Rgb> {
+/// ordinate) into `target`'s cells: each field read trilinearly between cell centres (clamped at the
+/// faces, as [`render::upsample`] without the range weight) at the same `2³` points per cell.
+pub fn merge_rectilinear(target: &Grid, sources: &[(&Grid, &[Rgb])]) -> Vec<Rgb> {
     box_filter(target, |p| {
         let mut sum = [0.0; 3];
         for (grid, field) in sources {
-            let v = render::upsample(grid, field, medium, p, 0.0);
+            let v = trilinear(grid, field, p);
             for ch in 0..3 {
                 sum[ch] += v[ch];
             }
         }
         sum
     })
+}
+
+/// `field` (one value per cell of `grid`) interpolated trilinearly at world point `p`.
+fn trilinear(grid: &Grid, field: &[Rgb], p: glam::DVec3) -> Rgb {
+    let t = grid.local(p) - glam::DVec3::splat(0.5);
+    let mut base = [0usize; 3];
+    let mut f = [0.0f64; 3];
+    for a in 0..3 {
+        let v = t[a].clamp(0.0, (grid.dims[a] - 1) as f64);
+        base[a] = (v as usize).min(grid.dims[a].saturating_sub(2));
+        f[a] = v - base[a] as f64;
+    }
+    let mut out = [0.0; 3];
+    for corner in 0..8 {
+        let o = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
+        let c = [0, 1, 2].map(|a| (base[a] + o[a]).min(grid.dims[a] - 1));
+        let w: f64 = (0..3).map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] }).product();
+        if w == 0.0 {
+            continue;
+        }
+        let v = field[grid.index(c)];
+        for ch in 0..3 {
+            out[ch] += w * v[ch];
+        }
+    }
+    out
 }
 
 /// `target`'s cells: the mean of `f` at `2³` points inside each cell (a box filter).

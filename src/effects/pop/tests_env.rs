@@ -2,6 +2,8 @@
 //! energy partition and prefiltered anisotropy, and POP under an environment against analytic limits
 //! and the Monte-Carlo reference.
 
+#![allow(clippy::needless_range_loop)] // per-channel loops over parallel arrays read clearer indexed
+
 use glam::DVec3;
 
 use super::environment::{self, EnvMap, EnvSampler, OrdinateSet, procedural_sky};
@@ -25,7 +27,7 @@ fn sun() -> DVec3 {
 }
 
 fn sky(w: usize, h: usize) -> EnvMap {
-    EnvMap::from_fn(w, h, |d| procedural_sky(d, sun(), 0.05, [400.0, 380.0, 340.0])).unwrap()
+    EnvMap::from_fn(w, h, |d| procedural_sky(d, Some((sun(), 0.05, [400.0, 380.0, 340.0])))).unwrap()
 }
 
 fn rel(a: f64, b: f64) -> f64 {
@@ -227,7 +229,7 @@ fn pop_env(medium: &VoxelMedium, env: &EnvMap, n: usize, dims: usize, iterations
         .collect();
     let merged = Grid::medium_aligned(medium, [2 * dims; 3]).unwrap();
     let sources: Vec<(&Grid, &[Rgb])> = fields.iter().map(|(g, f)| (g, f.as_slice())).collect();
-    let field = merge_rectilinear(&merged, medium, &sources);
+    let field = merge_rectilinear(&merged, &sources);
     let opts = MarchOptions { range_sigma: f64::INFINITY, ..Default::default() };
     march(&merged, &field, medium, cam, None, &opts).radiance
 }
@@ -358,4 +360,47 @@ fn pop_under_a_sky_against_path_tracing() {
     assert!(noise < 0.07, "{noise}");
     assert!(corrected < 0.2, "error {corrected} (noise {noise}), total ×{ratio}");
     assert!((0.8..1.0).contains(&ratio), "total ×{ratio}");
+}
+
+#[test]
+fn the_bundled_sky_file_is_the_procedural_sky() {
+    // scenes/sky.exr is written by `cargo run --example make_sky`; it must hold exactly the map the code
+    // describes (f32 storage of the f64 values).
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/sky.exr");
+    let file = EnvMap::read_exr(&path, 1.0).unwrap();
+    let want = environment::bundled_sky();
+    assert_eq!((file.width, file.height), (want.width, want.height));
+    for (a, b) in file.radiance.iter().zip(&want.radiance) {
+        for c in 0..3 {
+            assert_eq!(a[c], f64::from(b[c] as f32));
+        }
+    }
+    // Its integral: 2π × the mean over the upper hemisphere's √up blend plus 2π × the ground.
+    // ∫_0^1 √μ dμ = 2/3, so the green channel is 2π (0.65 − 0.33 · 2/3) + 2π · 0.09.
+    let g = file.integral()[1];
+    let want_g = std::f64::consts::TAU * (0.65 - 0.33 * 2.0 / 3.0) + std::f64::consts::TAU * 0.09;
+    assert!(rel(g, want_g) < 2e-3, "{g} vs {want_g}");
+}
+
+#[test]
+fn merging_rotated_grids_reproduces_linear_fields() {
+    // Trilinear reads of an oblique grid and a box filter are exact for a linear field away from the
+    // faces (where reads clamp): every merged cell holds the sum of the sources at its centre.
+    let medium = cube(1.0, 0.0, 0.0);
+    let src = Grid::new(&medium, DVec3::new(1.0, 2.0, 3.0).normalize(), [12; 3], &NoOccluder).unwrap();
+    let f = |p: DVec3| 2.0 + p.x - 0.5 * p.y + 0.25 * p.z;
+    let field: Vec<Rgb> = (0..src.len()).map(|i| [f(src.center(src.coords(i))), 1.0, 0.0]).collect();
+    let target = Grid::medium_aligned(&medium, [8; 3]).unwrap();
+    let merged = merge_rectilinear(&target, &[(&src, &field), (&src, &field)]);
+    let mut checked = 0;
+    for (n, v) in merged.iter().enumerate() {
+        let c = target.center(target.coords(n));
+        // The constant channel is exact everywhere (weights sum to 1).
+        assert!((v[1] - 2.0).abs() < 1e-12, "{v:?}");
+        if (c - DVec3::splat(0.5)).length() < 0.3 {
+            assert!((v[0] - 2.0 * f(c)).abs() < 1e-12, "cell {n}: {} vs {}", v[0], 2.0 * f(c));
+            checked += 1;
+        }
+    }
+    assert!(checked >= 8, "{checked}");
 }

@@ -66,7 +66,21 @@ impl Setup<'_> {
                 break;
             }
             let xi = dr.draw();
-            let target = if walk.sigma_t > 0.0 { -(-xi).ln_1p() / walk.sigma_t } else { f64::INFINITY };
+            let target = if events == 0 && matches!(lighting, Lighting::Environment(..)) {
+                // Forced first collision: draw the flight inside the segment, weighted by the probability
+                // of colliding there at all (1 − T), so thin media are not mostly missed.
+                let tau = walk.sigma_t * self.vox.density_integral(p, d, t0, t1);
+                let hit = -(-tau).exp_m1();
+                if hit <= 0.0 {
+                    break;
+                }
+                beta *= hit;
+                -(-xi * hit).ln_1p() / walk.sigma_t
+            } else if walk.sigma_t > 0.0 {
+                -(-xi).ln_1p() / walk.sigma_t
+            } else {
+                f64::INFINITY
+            };
             let Some(t) = self.vox.invert(p, d, t0, t1, target) else { break };
             p += d * t;
             if events == self.opts.max_events {

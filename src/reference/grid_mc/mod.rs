@@ -74,7 +74,9 @@
 //! ends; the eye ray ends at the G-buffer's surface distance). Next-event estimation draws a direction
 //! `w` from the map's importance sampler (density `p(w)` per steradian, positive everywhere) and adds
 //! `β·(σ_s/σ_t)·f_hg(w·ω_path)·L(w)·V(w)·exp(−σ_t ∫ density ds)/p(w)`, `V` the occluder's visibility.
-//! Escaping paths add nothing (the background the eye sees directly is not scattered light), so the
+//! The eye ray's first collision is forced into its segment through the medium (drawn ∝ `σ_t·T` on
+//! the segment, the weight multiplied by `1 − T` of the segment), so in thin media every path
+//! contributes. Escaping paths add nothing (the background the eye sees directly is not scattered light), so the
 //! estimate is unbiased with next-event estimation alone. Checked by the white furnace: albedo 1
 //! under a uniform map `L`, scattered + `L·T` = `L` along every ray.
 //!
