@@ -253,3 +253,34 @@ fn bake_stage_errors_name_the_field_or_the_file() {
     assert!(text(&o).contains("nowhere.gltf") && !text(&o).contains("panicked"), "{}", text(&o));
     assert!(!out.join("b").join("lightmap_surface.exr").exists());
 }
+
+#[test]
+fn pop_environment_errors_name_the_field_or_the_file() {
+    let d = tempdir();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/window_room.gltf");
+    let stage = |env: &str, set: &str| {
+        format!(
+            "(tables: [PopPreset(id: \"pop\", ordinates: 8, grid: (4, 4, 4))], stages: [PopRender(id: \"p\", \
+             scene: \"{}\", table: \"pop\", width: 8, height: 6, colour_samples: 1, environment: \"{env}\", \
+             environment_set: \"{set}\")])",
+            scene.display()
+        )
+    };
+    // An unknown ordinate set is refused at validation, naming the field and the choices.
+    let p = write(d.path(), "set.ron", &stage("sky.exr", "random"));
+    let o = common::run(&["check", p.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let t = text(&o);
+    assert!(t.contains("environment_set") && t.contains("fibonacci"), "{t}");
+    // A missing map and a corrupt one fail the run naming the file, and leave no image behind.
+    std::fs::write(d.path().join("corrupt.exr"), b"v/1\x01 not an exr").unwrap();
+    for (name, says) in [("missing.exr", "missing.exr"), ("corrupt.exr", "not a readable EXR")] {
+        let p = write(d.path(), "env.ron", &stage(name, "importance"));
+        let out = d.path().join(format!("out-{name}"));
+        let o = common::run(&["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(1), "{name}");
+        let t = text(&o);
+        assert!(t.contains(name) && t.contains(says) && !t.contains("panicked"), "{t}");
+        assert!(!out.join("p").join("pop.exr").exists());
+    }
+}

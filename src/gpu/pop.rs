@@ -191,6 +191,7 @@ pub fn propagate(
             isotropic_iterations: st[3] as usize,
             energy,
             times,
+            last: Vec::new(),
         },
         pass_times,
     ))

@@ -35,12 +35,15 @@
 //! `importance` settings are not used yet; the ordinates follow the map alone.
 
 use std::path::Path;
+use std::time::Instant;
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::grid::Rgb;
-use super::medium::DirectionalLight;
+use super::grid::{Grid, Occluder, Rgb};
+use super::medium::{DirectionalLight, VoxelMedium};
+use super::merge::merge_rectilinear;
+use super::propagate::{FlowTable, Observer, Propagation, Settings, isotropic_residuum, propagate_lobe};
 use crate::tables::pop_preset::ordinates::fibonacci_directions;
 
 /// Largest map side accepted (a 16k × 8k float map is 1.5 GiB as f64 RGB).
@@ -358,6 +361,118 @@ pub fn ordinates(env: &EnvMap, n: usize, set: OrdinateSet) -> Vec<EnvOrdinate> {
             EnvOrdinate { direction: (-dir).to_array(), irradiance: energy[k], anisotropy: a, solid_angle: omega[k] }
         })
         .collect()
+}
+
+/// Every ordinate of an environment propagated on its own grid, the merged isotropic residuum when it
+/// applies, and their accumulations merged into one medium-aligned grid (Secs. 5.3, 5.4).
+pub struct EnvPropagation {
+    /// Per ordinate: its grid, its iteration settings and its propagation.
+    pub ordinates: Vec<(Grid, Settings, Propagation)>,
+    /// The merged isotropic residuum: its grid and its iterations (when Eq. 10's switch falls inside
+    /// the iteration budget of every ordinate).
+    pub residuum: Option<(Grid, Propagation)>,
+    /// The medium-aligned render grid and its accumulated radiance toward the eye per unit `σ_s`.
+    pub merged: (Grid, Vec<Rgb>),
+    /// Building each ordinate's grid (medium downsampling, links) \[s\].
+    pub grid_seconds: Vec<f64>,
+    /// Resampling the ordinates' last iterates onto the residuum grid \[s\].
+    pub handover_seconds: f64,
+    /// Merging the accumulations into the render grid \[s\].
+    pub merge_seconds: f64,
+}
+
+/// How [`propagate_environment`] runs.
+pub struct EnvOptions<'a> {
+    /// Cells of every ordinate's grid and of the residuum grid.
+    pub dims: [usize; 3],
+    /// Cells of the medium-aligned render grid (elek2014: double the propagation grids).
+    pub merge_dims: [usize; 3],
+    /// The flow table of Eqs. 2–3.
+    pub flow: &'a FlowTable,
+    /// The iteration settings of a grid (Eq. 10's `m'` depends on its cell size along the ordinate).
+    pub settings: &'a (dyn Fn(&Grid) -> Settings + Sync),
+    /// The eye the accumulation looks from.
+    pub eye: DVec3,
+}
+
+/// Propagates `ordinates` through `medium` (elek2014 Sec. 5). Each runs on its own grid aligned with it
+/// ([`propagate_lobe`] with its prefiltered anisotropy). *Residuum (Sec. 5.4):* the paper switches when
+/// every grid's anisotropy is below `ε_a`, merges the propagation grids into one medium-aligned grid and
+/// continues isotropically there. voltab takes the largest Eq. 10 switch `m'` over the ordinates; when
+/// it is below the iteration budget `M` (and the preset enables the residuum), every ordinate runs `m'`
+/// anisotropic iterations, their last iterates are resampled onto one grid of the same resolution
+/// aligned with the medium (as power per volume, `L/Δ` with `Δ` the cube root of the cell volume, then
+/// back to `L` with the new cells, so the light's power carries over) and the isotropic iterations run
+/// there until `ε_L` of the seeded energy is left or `residuum_iterations` run out. Otherwise every
+/// ordinate runs as a lone light would.
+pub fn propagate_environment(
+    medium: &VoxelMedium,
+    ordinates: &[EnvOrdinate],
+    occluder: &dyn Occluder,
+    opts: &EnvOptions<'_>,
+) -> Result<EnvPropagation, String> {
+    let mut grids = Vec::with_capacity(ordinates.len());
+    let mut grid_seconds = Vec::with_capacity(ordinates.len());
+    for o in ordinates {
+        let t0 = Instant::now();
+        let grid = Grid::new(medium, DVec3::from(o.direction), opts.dims, occluder)?;
+        grid_seconds.push(t0.elapsed().as_secs_f64());
+        let settings = (opts.settings)(&grid);
+        grids.push((grid, settings));
+    }
+    let switch = grids.iter().map(|(_, s)| s.switch_iteration).max().unwrap_or(usize::MAX);
+    let merged_residuum = !grids.is_empty() && grids.iter().all(|(_, s)| s.residuum && switch < s.iterations);
+    let mut runs = Vec::with_capacity(grids.len());
+    for ((grid, settings), o) in grids.into_iter().zip(ordinates) {
+        let run_settings = if merged_residuum {
+            Settings { iterations: switch, residuum: false, ..settings.clone() }
+        } else {
+            settings.clone()
+        };
+        let p = propagate_lobe(
+            &grid,
+            &o.light(),
+            o.anisotropy,
+            occluder,
+            opts.flow,
+            &run_settings,
+            Observer::Eye(opts.eye),
+        );
+        runs.push((grid, settings, p));
+    }
+    let mut handover_seconds = 0.0;
+    let residuum = if merged_residuum {
+        let t0 = Instant::now();
+        let target = Grid::new(medium, DVec3::Z, opts.dims, occluder)?;
+        let cell = |g: &Grid| (g.size[0] * g.size[1] * g.size[2]).cbrt();
+        let scaled: Vec<Vec<Rgb>> =
+            runs.iter().map(|(g, _, p)| p.last.iter().map(|v| v.map(|x| x / cell(g))).collect()).collect();
+        let sources: Vec<(&Grid, &[Rgb])> = runs.iter().zip(&scaled).map(|((g, _, _), f)| (g, f.as_slice())).collect();
+        let dt = cell(&target);
+        let l0: Vec<Rgb> = merge_rectilinear(&target, &sources).into_iter().map(|v| v.map(|x| x * dt)).collect();
+        handover_seconds = t0.elapsed().as_secs_f64();
+        let seeded: f64 = runs.iter().map(|(_, _, p)| p.energy.first().copied().unwrap_or(0.0)).sum();
+        let (max_iterations, eps_l) = runs.first().map_or((0, 0.0), |(_, s, _)| (s.residuum_iterations, s.eps_l));
+        let p = isotropic_residuum(&target, opts.flow, l0, max_iterations, eps_l * seeded, opts.eye);
+        Some((target, p))
+    } else {
+        None
+    };
+    let t0 = Instant::now();
+    let merged = Grid::medium_aligned(medium, opts.merge_dims)?;
+    let mut sources: Vec<(&Grid, &[Rgb])> = runs.iter().map(|(g, _, p)| (g, p.toward_eye.as_slice())).collect();
+    if let Some((g, p)) = &residuum {
+        sources.push((g, p.toward_eye.as_slice()));
+    }
+    let field = merge_rectilinear(&merged, &sources);
+    Ok(EnvPropagation {
+        ordinates: runs,
+        residuum,
+        merged: (merged, field),
+        grid_seconds,
+        handover_seconds,
+        merge_seconds: t0.elapsed().as_secs_f64(),
+    })
 }
 
 /// A sky for the bundled scenes and the tests: a horizon-to-zenith gradient above (`√up` blend from a pale

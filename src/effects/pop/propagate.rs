@@ -151,6 +151,9 @@ pub struct Propagation {
     pub energy: Vec<f64>,
     /// Times per phase.
     pub times: PhaseTimes,
+    /// The last iterate `L^m` (already accumulated): where a merged isotropic residuum on another grid
+    /// continues ([`isotropic_residuum`]). Empty from the GPU.
+    pub last: Vec<Rgb>,
 }
 
 struct Accumulator<'a> {
@@ -325,6 +328,52 @@ pub fn propagate_lobe(
         isotropic_iterations,
         energy,
         times: PhaseTimes { initialisation: init_seconds, propagation, residuum, accumulation: acc.seconds },
+        last: l,
+    }
+}
+
+/// elek2014 Sec. 5.4 with several grids: once every ordinate's lobes are nearly isotropic, their
+/// remaining light `l0` (the ordinates' last iterates resampled onto `grid`, already accumulated there)
+/// continues as isotropic iterations on this one grid, at most `max_iterations` and until an iterate's
+/// energy falls below `stop`. Returns the accumulation toward `eye` (`L f_hg(u, 0) = L/4π` per iterate)
+/// and the fluence of these iterations only; `uncollided` is zero.
+pub fn isotropic_residuum(
+    grid: &Grid,
+    flow: &FlowTable,
+    l0: Vec<Rgb>,
+    max_iterations: usize,
+    stop: f64,
+    eye: DVec3,
+) -> Propagation {
+    let start = Instant::now();
+    let mut acc = Accumulator::new(grid, Observer::Eye(eye));
+    let total = |l: &[Rgb]| l.iter().map(|v| v[0] + v[1] + v[2]).sum::<f64>();
+    let zero = vec![[0.0; 3]; grid.len()];
+    let mut energy = vec![total(&l0)];
+    let mut l = l0;
+    let mut isotropic_iterations = 0;
+    while isotropic_iterations < max_iterations && *energy.last().unwrap_or(&0.0) > stop {
+        l = step(grid, flow, &l, None).0;
+        acc.add(&l, &zero, 1.0);
+        energy.push(total(&l));
+        isotropic_iterations += 1;
+    }
+    Propagation {
+        uncollided: zero,
+        fluence: acc.fluence,
+        toward_eye: acc.toward_eye,
+        bins: Vec::new(),
+        theta_bins: 0,
+        anisotropic_iterations: 0,
+        isotropic_iterations,
+        energy,
+        times: PhaseTimes {
+            initialisation: 0.0,
+            propagation: 0.0,
+            residuum: start.elapsed().as_secs_f64(),
+            accumulation: acc.seconds,
+        },
+        last: l,
     }
 }
 
