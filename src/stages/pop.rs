@@ -1,13 +1,16 @@
-//! `PopRender`: scene + `PopPreset` table → elek2014 Principal-Ordinates Propagation of the scene's
-//! global medium lit by its directional lights, ray-marched into an EXR + PNG, with an optional
-//! comparison against brute-force volumetric path tracing.
+//! `PopRender`: scene + `PopPreset` table (+ an environment map) → elek2014 Principal-Ordinates
+//! Propagation of the scene's global medium lit by its directional lights (Sec. 4), its point, spot and
+//! sphere lights (radial grids, Sec. 6) and the environment's principal ordinates (Sec. 5), ray-marched
+//! into an EXR + PNG, with an optional comparison against brute-force volumetric path tracing.
 //!
 //! **Input.** A scene file (relative to the pipeline file) with a perspective camera, one global
 //! medium (homogeneous or exponential height fog; optionally multiplied by a raw `f32` density volume
-//! spanning the scene's bounds) and directional lights; the id of a compiled `PopPreset` table (grid,
+//! spanning the scene's bounds), its lights and optionally a latitude–longitude EXR environment map; the
+//! id of a compiled `PopPreset` table (grid,
 //! iterations, ε_L, ε_a, residuum switch, flow table). **Phases** (elek2014 Fig. 14 names, in
-//! `summary.json`): import → BVH → G-buffer → voxelisation → per directional light: grid and medium
-//! downsampling, initialisation (Sec. 4.1), propagation (Eqs. 2–8), isotropic residuum (Sec. 5.4) →
+//! `summary.json`): import → BVH → G-buffer → voxelisation → (environment: ordinates, Sec. 5.1) → per
+//! directional light or ordinate: grid and medium downsampling, initialisation (Sec. 4.1), propagation
+//! (Eqs. 2–8), isotropic residuum (Sec. 5.4, merged across the ordinates) → merge (Sec. 5.3) →
 //! ray marching with joint-bilateral upsampling (Sec. 4.4) → `<out>/<stage>/pop.exr` (layers
 //! `scattered`, `transmittance`, `colour`) with PNG previews and `summary.json`.
 //!

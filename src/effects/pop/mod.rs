@@ -12,6 +12,7 @@
 //! | [`grid`] | Sec. 4 grid aligned with `d`, Sec. 4.2 medium downsampling, link factors of Eqs. 2 and 4 |
 //! | [`propagate`] | Sec. 4.1 sweep, Eqs. 2–6 iterations, Eqs. 7–8 accumulation, Sec. 5.4 residuum |
 //! | [`render`] | Sec. 4.4 joint-bilateral upsampling and front-to-back ray marching |
+//! | [`environment`] | Secs. 5.1, 5.3, 5.4: environment maps → ordinates with prefiltered lobes, merged grids and residuum |
 //!
 //! Where voltab departs from the paper (the exact uncollided beam and first-scattering seed instead
 //! of propagating `L_in T_i` from every cell; the phase convolution in the accumulation) is stated in
