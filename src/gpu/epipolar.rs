@@ -14,7 +14,7 @@
 //! **Integration, and how it differs from the paper's sweep.** The CPU (and the paper) sweep each
 //! slice's `β` samples in order in one thread, updating a Fenwick tree as depth modes are passed:
 //! `O(log bins)` per sample, but one long sequential loop per slice. The device cuts each slice's
-//! samples into blocks of about √S ([`integration_blocks`]): one pass evaluates every bin's visible
+//! samples into blocks of about √S (`integration_blocks`): one pass evaluates every bin's visible
 //! leaf at each block's first sample and prefix-sums it, and lists the bins with a depth mode inside
 //! the block; each (sample, lane) thread then takes its block's prefix sum at its `γ_end` bin and
 //! subtracts what the listed bins below it lose between the block's start and its own `β`. Work per

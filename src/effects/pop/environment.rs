@@ -4,7 +4,7 @@
 //! **Input → output.** An [`EnvMap`] (radiance per texel, read from an EXR or built from a function),
 //! an ordinate count `N` and a direction set ([`OrdinateSet`]) → [`EnvOrdinate`]s: the direction the
 //! light of ordinate `n` travels, its irradiance `E_n = ∫_{Ω_n} L dω` (per channel) and the initial
-//! anisotropy `a_n` of its HG lobe. [`propagate_lobe`](super::propagate::propagate_lobe) propagates each
+//! anisotropy `a_n` of its HG lobe. [`propagate_lobe`] propagates each
 //! as a directional light on its own grid, and [`merge`](super::merge) combines the grids (Sec. 5.3).
 //!
 //! **Map convention.** Row 0 is the top. Texel `(col, row)` covers polar angles
