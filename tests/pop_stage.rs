@@ -124,3 +124,80 @@ fn fog_room_point_light_against_path_tracing() {
     assert!(e > noise * 0.9, "POP cannot be closer to the reference than its own noise: {e} vs {noise}");
     assert!((0.97..1.07).contains(&ratio), "total ratio {ratio}");
 }
+
+#[test]
+fn exr_slice_density_renders_as_the_same_raw_volume() {
+    // One 6 × 5 × 4 density volume written as raw f32 and as four EXR slices (row 0 = top = largest y):
+    // the two stages must give bit-identical images.
+    let d = tempdir();
+    let (w, h, n) = (6usize, 5usize, 4usize);
+    let density = |x: usize, y: usize, z: usize| 0.2 + ((x * 7 + y * 3 + z * 5) % 11) as f32 * 0.15;
+    let mut raw = Vec::new();
+    for z in 0..n {
+        for y in 0..h {
+            for x in 0..w {
+                raw.extend_from_slice(&density(x, y, z).to_le_bytes());
+            }
+        }
+        let px: Vec<[f32; 3]> = (0..w * h).map(|i| [density(i % w, h - 1 - i / w, z), 0.0, 0.0]).collect();
+        std::fs::create_dir_all(d.path().join("slices")).unwrap();
+        voltab::image_io::write_exr_rgb(&d.path().join(format!("slices/z{z:02}.exr")), w, h, &px, &[]).unwrap();
+    }
+    std::fs::write(d.path().join("smoke.raw"), raw).unwrap();
+    let run = |extra: &str, name: &str| {
+        let src = pipeline(extra).replace("fig12_photons: 20000", "fig12_photons: 0");
+        let p = write(d.path(), &format!("{name}.ron"), &src);
+        let out = d.path().join(name);
+        let o = voltab().args(["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        let exr = voltab::image_io::read_exr_rgb(&out.join("pop_stage/pop.exr")).unwrap();
+        exr.rgb(Some("scattered")).unwrap()
+    };
+    let a = run(", density_raw: \"smoke.raw\", density_dims: (6, 5, 4)", "raw");
+    let b = run(", density_slices: \"slices\"", "slices");
+    assert_eq!(a, b);
+    assert!(a.iter().any(|p| p[1] > 0.0));
+    // Both at once is refused by `check`, naming the field.
+    let p = write(
+        d.path(),
+        "both.ron",
+        &pipeline(", density_raw: \"smoke.raw\", density_dims: (6, 5, 4), density_slices: \"slices\""),
+    );
+    let o = voltab().args(["check", p.to_str().unwrap()]).output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("density_slices"), "{}", text(&o));
+}
+
+#[test]
+fn window_room_under_the_bundled_sky() {
+    // The sun plus the bundled sky through the window: the sky's ordinates carry its whole integral, and
+    // the scattered light is compared with path tracing (the environment part from grid_mc).
+    let d = tempdir();
+    let sky = root().join("scenes/sky.exr");
+    let extra = format!(
+        ", environment: \"{}\", environment_intensity: 10, environment_ordinates: 16, reference_samples: 64, reference_width: 16",
+        sky.display()
+    );
+    let src = pipeline(&extra).replace("fig12_photons: 20000", "fig12_photons: 0");
+    let p = write(d.path(), "sky.ron", &src);
+    let out = d.path().join("out");
+    let o = voltab().args(["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let sum: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("pop_stage/summary.json")).unwrap()).unwrap();
+    let env = &sum["environment"];
+    let ords = env["ordinates"].as_array().unwrap();
+    assert!(!ords.is_empty() && ords.len() <= 16, "{}", ords.len());
+    let integral = env["integral"][1].as_f64().unwrap();
+    let parts: f64 = ords.iter().map(|o| o["irradiance"][1].as_f64().unwrap()).sum();
+    assert!((parts - integral).abs() < 1e-9 * integral, "{parts} vs {integral}");
+    // 10 × the bundled sky's green integral, 2π(0.65 − 0.33·2/3) + 2π·0.09 (its golden test).
+    let want = 10.0 * std::f64::consts::TAU * (0.65 - 0.22 + 0.09);
+    assert!((integral - want).abs() < 2e-3 * want, "{integral} vs {want}");
+    let kinds: Vec<&str> = sum["lights"].as_array().unwrap().iter().map(|l| l["kind"].as_str().unwrap()).collect();
+    assert_eq!(kinds.iter().filter(|k| **k == "environment").count(), ords.len());
+    assert_eq!(kinds.iter().filter(|k| **k == "directional").count(), 1);
+    let r = &sum["reference"];
+    let (e, ratio) = (r["error_corrected"].as_f64().unwrap(), r["total_ratio"].as_f64().unwrap());
+    assert!(e.is_finite() && ratio > 0.5 && ratio < 2.0, "{r}");
+}

@@ -4,10 +4,10 @@
 //! into an EXR + PNG, with an optional comparison against brute-force volumetric path tracing.
 //!
 //! **Input.** A scene file (relative to the pipeline file) with a perspective camera, one global
-//! medium (homogeneous or exponential height fog; optionally multiplied by a raw `f32` density volume
-//! spanning the scene's bounds), its lights and optionally a latitude–longitude EXR environment map; the
-//! id of a compiled `PopPreset` table (grid,
-//! iterations, ε_L, ε_a, residuum switch, flow table). **Phases** (elek2014 Fig. 14 names, in
+//! medium (homogeneous or exponential height fog; optionally multiplied by a raw `f32` or EXR-slice
+//! density volume spanning the scene's bounds), its lights and optionally a latitude–longitude EXR
+//! environment map; the id of a compiled `PopPreset` table (grid, iterations, ε_L, ε_a, residuum
+//! switch, flow table). **Phases** (elek2014 Fig. 14 names, in
 //! `summary.json`): import → BVH → G-buffer → voxelisation → (environment: ordinates, Sec. 5.1) → per
 //! directional light or ordinate: grid and medium downsampling, initialisation (Sec. 4.1), propagation
 //! (Eqs. 2–8), isotropic residuum (Sec. 5.4, merged across the ordinates) → merge (Sec. 5.3) →
@@ -64,6 +64,11 @@ crate::declare_params! {
         /// Raw little-endian f32 density volume (x fastest) spanning the scene's bounds, relative to the
         /// pipeline file, multiplying the medium's density; empty: none.
         density_raw: String = String::new(), unit = "", range = "empty or path to a .raw file";
+        /// Folder of EXR images, one z slice of a density volume per file in file-name order (x = width,
+        /// y = height with row 0 at the top, channel `density`, `Y`, `R` or `A`), spanning the scene's
+        /// bounds and multiplying the medium's density, relative to the pipeline file; empty: none. Not
+        /// with `density_raw`.
+        density_slices: String = String::new(), unit = "", range = "empty or path to a folder of .exr slices";
         /// Voxels of `density_raw` along x, y, z.
         density_dims: [u32; 3] = [0, 0, 0], unit = "voxels", range = "each 1 to 1024 when density_raw is given";
         /// Latitude-longitude HDR environment map (EXR with R, G, B; row 0 up, centre column toward +Z)
@@ -591,6 +596,13 @@ impl PopRender {
                 "give the raw volume's voxels per axis, each 1 to 1024",
             );
         }
+        if !self.density_raw.is_empty() && !self.density_slices.is_empty() {
+            issue(
+                "density_slices",
+                format!("both density_raw = \"{}\" and density_slices = \"{}\"", self.density_raw, self.density_slices),
+                "give one density volume: a raw file or a folder of EXR slices",
+            );
+        }
         if !(self.environment_intensity.is_finite() && (0.0..=1e6).contains(&self.environment_intensity)) {
             issue(
                 "environment_intensity",
@@ -642,14 +654,22 @@ impl PopRender {
         PopPresetTable::open(&path).map_err(|e| StageError::Table { stage: id.into(), path, message: e.to_string() })
     }
 
-    /// The scene's media for POP (voxelised, with the raw density when given).
+    /// The scene's media for POP (voxelised, with the raw or EXR-slice density when given).
     pub fn media(&self, id: &str, ctx: &StageContext, scene: &Scene) -> Result<SceneMedia, StageError> {
         let fail = |message: String| StageError::Input {
             stage: id.into(),
             message,
             help: "fix the scene's medium and lights, or the stage's density_raw / density_dims".into(),
         };
-        let raw = if self.density_raw.is_empty() {
+        let raw = if !self.density_slices.is_empty() {
+            let (dims, values) = crate::effects::pop::medium::read_exr_slices(&ctx.base_dir.join(&self.density_slices))
+                .map_err(|message| StageError::Input {
+                    stage: id.into(),
+                    message,
+                    help: "give density_slices a folder of EXR images, one z slice per file in name order".into(),
+                })?;
+            Some(RawDensity { dims, values })
+        } else if self.density_raw.is_empty() {
             None
         } else {
             let dims = self.density_dims.map(|d| d as usize);

@@ -166,9 +166,134 @@ pub fn read_raw_density(path: &Path, dims: [usize; 3]) -> Result<Vec<f32>, Strin
     Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
 }
 
+/// Largest slice count and slice side of an EXR-slice volume.
+pub const MAX_SLICE_VOXELS: usize = 1024;
+
+/// Reads a density volume stored as a folder of EXR images, one z slice per file in file-name order
+/// (`slice_000.exr`, `slice_001.exr`, … — every `.exr` in the folder). Each slice's width is x and its
+/// height y, with image row 0 at the *top*, i.e. the largest y (so a slice looks as it does in an image
+/// viewer with y up). The density is the first channel present of `density`, `Y`, `R`, `A`. Returns the
+/// voxels per axis and the densities, x fastest.
+///
+/// # Errors
+/// A message naming the folder or the file: unreadable folder, no `.exr` in it, more than 1024 slices,
+/// an undecodable file, a slice without any of the channels, slices of different sizes or larger than
+/// 1024, and a negative, NaN or infinite density (with its pixel).
+pub fn read_exr_slices(dir: &Path) -> Result<([usize; 3], Vec<f32>), String> {
+    let entries =
+        std::fs::read_dir(dir).map_err(|e| format!("{}: cannot read the slice folder: {e}", dir.display()))?;
+    let mut files: Vec<std::path::PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("exr")))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(format!("{}: no .exr slices in the folder; put one EXR per z slice there", dir.display()));
+    }
+    if files.len() > MAX_SLICE_VOXELS {
+        return Err(format!("{}: {} slices; at most {MAX_SLICE_VOXELS}", dir.display(), files.len()));
+    }
+    let mut dims = [0usize, 0, files.len()];
+    let mut values = Vec::new();
+    for (z, file) in files.iter().enumerate() {
+        let image = crate::image_io::read_exr_rgb(file).map_err(|e| e.to_string())?;
+        let Some((name, data)) =
+            ["density", "Y", "R", "A"].iter().find_map(|c| image.channels.get(*c).map(|d| (*c, d)))
+        else {
+            return Err(format!(
+                "{}: no density channel (looked for density, Y, R, A; the file has {:?})",
+                file.display(),
+                image.channels.keys().collect::<Vec<_>>()
+            ));
+        };
+        if z == 0 {
+            dims[0] = image.width;
+            dims[1] = image.height;
+            if image.width > MAX_SLICE_VOXELS || image.height > MAX_SLICE_VOXELS {
+                return Err(format!(
+                    "{}: {} × {} pixels; slices may be at most {MAX_SLICE_VOXELS} on a side",
+                    file.display(),
+                    image.width,
+                    image.height
+                ));
+            }
+            values.reserve(dims[0] * dims[1] * dims[2]);
+        } else if [image.width, image.height] != [dims[0], dims[1]] {
+            return Err(format!(
+                "{}: {} × {} pixels, but {} is {} × {}; every slice must have the same size",
+                file.display(),
+                image.width,
+                image.height,
+                files[0].display(),
+                dims[0],
+                dims[1]
+            ));
+        }
+        for y in 0..dims[1] {
+            let row = dims[1] - 1 - y;
+            for x in 0..dims[0] {
+                let v = data[row * dims[0] + x];
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(format!(
+                        "{}: channel {name} at pixel ({x}, {row}) is {v}; densities must be finite and ≥ 0",
+                        file.display()
+                    ));
+                }
+                values.push(v);
+            }
+        }
+    }
+    Ok((dims, values))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn exr_slices_read_as_the_volume_they_store() {
+        let dir = std::env::temp_dir().join(format!("voltab-slices-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // density(x, y, z) = x + 10 y + 100 z on a 3 × 2 × 4 volume; rows run top (y = 1) to bottom.
+        let (w, h, d) = (3usize, 2usize, 4usize);
+        for z in 0..d {
+            let px: Vec<[f32; 3]> = (0..w * h)
+                .map(|i| {
+                    let (x, row) = (i % w, i / w);
+                    let y = h - 1 - row;
+                    let v = (x + 10 * y + 100 * z) as f32;
+                    [v, 0.0, 0.0]
+                })
+                .collect();
+            crate::image_io::write_exr_rgb(&dir.join(format!("s{z:03}.exr")), w, h, &px, &[]).unwrap();
+        }
+        std::fs::write(dir.join("notes.txt"), b"ignored").unwrap();
+        let (dims, vals) = read_exr_slices(&dir).unwrap();
+        assert_eq!(dims, [3, 2, 4]);
+        for z in 0..d {
+            for y in 0..h {
+                for x in 0..w {
+                    assert_eq!(vals[x + w * (y + h * z)], (x + 10 * y + 100 * z) as f32);
+                }
+            }
+        }
+        // A slice of another size, a negative density and an empty folder are refused, naming the file.
+        crate::image_io::write_exr_rgb(&dir.join("s999.exr"), 2, 2, &[[1.0, 0.0, 0.0]; 4], &[]).unwrap();
+        let e = read_exr_slices(&dir).unwrap_err();
+        assert!(e.contains("s999.exr") && e.contains("same size"), "{e}");
+        std::fs::remove_file(dir.join("s999.exr")).unwrap();
+        let mut bad = vec![[1.0f32, 0.0, 0.0]; w * h];
+        bad[4] = [-2.0, 0.0, 0.0];
+        crate::image_io::write_exr_rgb(&dir.join("s002.exr"), w, h, &bad, &[]).unwrap();
+        let e = read_exr_slices(&dir).unwrap_err();
+        assert!(e.contains("s002.exr") && e.contains("pixel (1, 1)") && e.contains("-2"), "{e}");
+        let empty = dir.join("empty");
+        std::fs::create_dir_all(&empty).unwrap();
+        assert!(read_exr_slices(&empty).unwrap_err().contains("no .exr slices"));
+        assert!(read_exr_slices(&dir.join("missing")).unwrap_err().contains("cannot read the slice folder"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     fn coeffs() -> ([f64; 3], [f64; 3], [f64; 3]) {
         ([4.0; 3], [0.0; 3], [0.7; 3])
