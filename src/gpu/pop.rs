@@ -323,7 +323,7 @@ mod tests {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/window_room.gltf");
         let scene = Scene::load(&path).unwrap();
         let bvh = SceneBvh::build(&scene);
-        let media = scene_media(&scene, 64, None, None).unwrap();
+        let media = scene_media(&scene, 64, None, None, 0).unwrap();
         let occ = BvhOccluder(&bvh);
         let l = &media.lights[0];
         let grid = Grid::new(&media.medium, l.direction, [20, 20, 20], &occ).unwrap();

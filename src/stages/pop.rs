@@ -71,6 +71,10 @@ crate::declare_params! {
         density_slices: String = String::new(), unit = "", range = "empty or path to a folder of .exr slices";
         /// Voxels of `density_raw` along x, y, z.
         density_dims: [u32; 3] = [0, 0, 0], unit = "voxels", range = "each 1 to 1024 when density_raw is given";
+        /// VPLs per area light or emissive mesh (instant radiosity, elek2014 Sec. 6): Lambertian point
+        /// lights on radial grids, each an equal share of the emitter's area (rect and disk lights round
+        /// up to a square number); 0 skips area lights.
+        vpls: u32 = 4, unit = "VPLs per emitter", range = "0 to 256";
         /// Latitude-longitude HDR environment map (EXR with R, G, B; row 0 up, centre column toward +Z)
         /// lighting the medium through principal ordinates (elek2014 Sec. 5), relative to the pipeline
         /// file; empty: none.
@@ -610,6 +614,9 @@ impl PopRender {
                 "use 0 to 1e6 (1 keeps the map's radiance)",
             );
         }
+        if self.vpls > 256 {
+            issue("vpls", format!("vpls = {}", self.vpls), "use 0 (skip area lights) to 256 VPLs per emitter");
+        }
         if self.environment_ordinates > 4096 {
             issue(
                 "environment_ordinates",
@@ -693,7 +700,7 @@ impl PopRender {
                 set: self.ordinate_set().unwrap_or(OrdinateSet::Importance),
             })
         };
-        pop_scene::scene_media(scene, self.voxels as usize, raw.as_ref(), environment).map_err(fail)
+        pop_scene::scene_media(scene, self.voxels as usize, raw.as_ref(), environment, self.vpls as usize).map_err(fail)
     }
 
     /// The ordinate set named by `environment_set`.
@@ -838,15 +845,13 @@ pub fn compare_with_reference(
     let t0 = Instant::now();
     let n = cam.width * cam.height;
     let mut mean = vec![[0.0f64; 3]; n];
-    let mut variance_sum = 0.0;
+    let mut variance = vec![[0.0f64; 3]; n];
     if !media.lights.is_empty() || !media.points.is_empty() {
         let ref_scene = pop_scene::scattering_reference_scene(scene, media);
         let bvh = SceneBvh::build(&ref_scene);
-        let (img, _, noise) = view::path_trace(&ref_scene, &bvh, cam, samples, 256, true);
-        let sq: f64 = img.data.iter().map(|c| c.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>()).sum();
-        variance_sum += noise * noise * sq;
-        for (m, v) in mean.iter_mut().zip(&img.data) {
-            *m = v.map(f64::from);
+        for (i, (m, se)) in view::path_trace_pixels(&ref_scene, &bvh, cam, samples, 256, true).into_iter().enumerate() {
+            mean[i] = m.map(|v| if v.is_finite() { v } else { 0.0 });
+            variance[i] = se.map(|v| if v.is_finite() { v * v } else { 0.0 });
         }
     }
     if let Some(env) = &media.environment {
@@ -860,19 +865,38 @@ pub fn compare_with_reference(
             None,
             &opts,
         );
-        for ((m, v), var) in mean.iter_mut().zip(&r.radiance).zip(&r.variance) {
+        for ((m, v), (s, var)) in mean.iter_mut().zip(&r.radiance).zip(variance.iter_mut().zip(&r.variance)) {
             for c in 0..3 {
                 m[c] += v[c];
-                variance_sum += var[c];
+                s[c] += var[c];
             }
         }
     }
     let ref_ms = ms(t0);
-    let img = Image { width: cam.width, height: cam.height, data: mean.iter().map(|v| v.map(|x| x as f32)).collect() };
+    // Pixels that see a VPL emitter directly hold its radiance in the reference: both images leave them out.
+    let masked = if media.vpl_sources.is_empty() {
+        vec![false; n]
+    } else {
+        pop_scene::sees_vpl_emitter(scene, &SceneBvh::build(scene), media, cam)
+    };
+    let keep = |v: [f64; 3], m: bool| if m { [0.0; 3] } else { v };
+    let img = Image {
+        width: cam.width,
+        height: cam.height,
+        data: mean.iter().zip(&masked).map(|(v, &m)| keep(*v, m).map(|x| x as f32)).collect(),
+    };
+    let pop_kept = Image {
+        width: pop.width,
+        height: pop.height,
+        data: pop.data.iter().zip(&masked).map(|(v, &m)| if m { [0.0; 3] } else { *v }).collect(),
+    };
+    let pop = &pop_kept;
+    let variance_sum: f64 =
+        variance.iter().zip(&masked).filter(|(_, m)| !**m).map(|(v, _)| v.iter().sum::<f64>()).sum();
     let error = crate::effects::rel_rmse(pop, &img);
     let sum = |i: &RgbImage| i.data.iter().map(|c| c.iter().map(|&v| f64::from(v)).sum::<f64>()).sum::<f64>();
     let r = sum(&img);
-    let sq: f64 = mean.iter().map(|c| c.iter().map(|v| v * v).sum::<f64>()).sum();
+    let sq: f64 = mean.iter().zip(&masked).map(|(c, &m)| keep(*c, m).iter().map(|v| v * v).sum::<f64>()).sum();
     let noise = if sq > 0.0 { (variance_sum / sq).sqrt() } else { 0.0 };
     let c = ReferenceComparison {
         size: [cam.width, cam.height],

@@ -199,20 +199,15 @@ pub fn ms(t0: Instant) -> f64 {
     t0.elapsed().as_secs_f64() * 1e3
 }
 
-/// Path-traced image of `cam` ([`volpath::radiance`], surfaces bounce, `samples` paths per pixel, at
-/// most `depth` vertices) with or without media, its mean relative standard error (luminance), and its
-/// noise as a relative RMSE (`sqrt(Σ stderr²) / sqrt(Σ L²)` over pixels and channels). The two
-/// settings of `media` use independent random streams.
-///
-/// [`volpath::radiance`]: crate::reference::volpath::radiance
-pub fn path_trace(
+/// Per pixel of `cam`: the path-traced radiance (mean) and its standard error (see [`path_trace`]).
+pub fn path_trace_pixels(
     scene: &Scene,
     bvh: &SceneBvh,
     cam: &ViewCamera,
     samples: u32,
     depth: u32,
     media: bool,
-) -> (RgbImage, f64, f64) {
+) -> Vec<([f64; 3], [f64; 3])> {
     use crate::reference::volpath::{self, CameraRay, VolPathOptions};
     let rays: Vec<CameraRay> = (0..cam.height)
         .flat_map(|y| (0..cam.width).map(move |x| (x, y)))
@@ -227,18 +222,36 @@ pub fn path_trace(
         media,
     };
     let (est, _) = volpath::radiance(scene, bvh, &rays, &opts);
+    est.iter().map(|e| (e.mean, e.stderr)).collect()
+}
+
+/// Path-traced image of `cam` ([`volpath::radiance`], surfaces bounce, `samples` paths per pixel, at
+/// most `depth` vertices) with or without media, its mean relative standard error (luminance), and its
+/// noise as a relative RMSE (`sqrt(Σ stderr²) / sqrt(Σ L²)` over pixels and channels). The two
+/// settings of `media` use independent random streams.
+///
+/// [`volpath::radiance`]: crate::reference::volpath::radiance
+pub fn path_trace(
+    scene: &Scene,
+    bvh: &SceneBvh,
+    cam: &ViewCamera,
+    samples: u32,
+    depth: u32,
+    media: bool,
+) -> (RgbImage, f64, f64) {
+    let est = path_trace_pixels(scene, bvh, cam, samples, depth, media);
     let lum = |c: [f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
     let (mut se, mut m, mut var, mut sq) = (0.0, 0.0, 0.0, 0.0);
     for e in &est {
-        se += lum(e.stderr);
-        m += lum(e.mean);
-        var += e.stderr.iter().map(|x| x * x).sum::<f64>();
-        sq += e.mean.iter().map(|x| x * x).sum::<f64>();
+        se += lum(e.1);
+        m += lum(e.0);
+        var += e.1.iter().map(|x| x * x).sum::<f64>();
+        sq += e.0.iter().map(|x| x * x).sum::<f64>();
     }
     let img = crate::effects::Image {
         width: cam.width,
         height: cam.height,
-        data: est.iter().map(|e| e.mean.map(|c| if c.is_finite() { c as f32 } else { 0.0 })).collect(),
+        data: est.iter().map(|e| e.0.map(|c| if c.is_finite() { c as f32 } else { 0.0 })).collect(),
     };
     let noise = if sq > 0.0 { (var / sq).sqrt() } else { 0.0 };
     (img, if m > 0.0 { se / m } else { 0.0 }, noise)

@@ -64,17 +64,25 @@ pub struct PointLight {
     pub intensity: Rgb,
     /// The cone of a spot light; `None`: isotropic.
     pub spot: Option<Spot>,
+    /// The unit normal of a Lambertian emitter (a VPL standing for part of an area light): the intensity
+    /// falls off as `max(0, n·w)` (`intensity` is the value along `n`); `None`: no cosine falloff.
+    pub normal: Option<DVec3>,
 }
 
 impl PointLight {
-    /// Relative intensity toward unit direction `w` (1 for a point light; the squared KHR ramp for a spot).
+    /// Relative intensity toward unit direction `w` (1 for a point light; the squared KHR ramp for a spot;
+    /// times `max(0, n·w)` for a Lambertian VPL).
     pub fn profile(&self, w: DVec3) -> f64 {
-        match self.spot {
+        let cone = match self.spot {
             None => 1.0,
             Some(s) => {
                 let f = ((s.axis.dot(w) - s.cos_outer) * s.inv_range).clamp(0.0, 1.0);
                 f * f
             }
+        };
+        match self.normal {
+            None => cone,
+            Some(n) => cone * n.dot(w).max(0.0),
         }
     }
 }

@@ -53,6 +53,8 @@ pub struct SceneMedia {
     pub skipped: Vec<String>,
     /// Environment lighting (elek2014 Sec. 5), when the stage gives a map.
     pub environment: Option<Environment>,
+    /// The area lights and emissive meshes propagated as VPLs (their names in the scene).
+    pub vpl_sources: Vec<String>,
 }
 
 /// An environment map and how to split it into principal ordinates.
@@ -77,18 +79,105 @@ pub struct RawDensity {
     pub values: Vec<f32>,
 }
 
+/// `1/Φ` (Φ the golden ratio): the second coordinate of the Fibonacci lattice placing VPLs.
+const INV_PHI: f64 = 0.618_033_988_749_894_8;
+
+/// Instant-radiosity VPLs for an area light (elek2014 Sec. 6): `k` Lambertian point lights spread over a
+/// rect, disk or emissive mesh, each standing for an equal share `A/k` of its area, so its intensity
+/// along the normal is `L·A/k` and falls off as `max(0, n·w)`; each lifted `lift` off the surface along
+/// its normal (so the emitter's own triangles do not shadow it). Placement is stratified: a rect or disk
+/// takes the centres of an `m × m` grid (`m = ⌈√k⌉`, so `m²` VPLs; a disk through the concentric map), a
+/// mesh the points `((i + ½)/k, frac(i/Φ))` of a Fibonacci lattice through its triangles' area
+/// distribution. `None` for lights that are not area lights; an empty list for a degenerate emitter.
+pub fn area_vpls(scene: &Scene, light: &crate::scene::Light, k: usize, lift: f64) -> Option<Vec<PointLight>> {
+    let k = k.max(1);
+    let vpl = |p: DVec3, n: DVec3, area_share: f64| PointLight {
+        position: p + n * lift,
+        intensity: light.radiance.map(|v| v * area_share),
+        spot: None,
+        normal: Some(n),
+    };
+    let m = (k as f64).sqrt().ceil() as usize;
+    let cells = || (0..m * m).map(move |i| (((i % m) as f64 + 0.5) / m as f64, ((i / m) as f64 + 0.5) / m as f64));
+    match &light.kind {
+        LightKind::Rect { center, half_u, half_v, normal } => {
+            let (c, u, v) = (DVec3::from_array(*center), DVec3::from_array(*half_u), DVec3::from_array(*half_v));
+            let n = DVec3::from_array(*normal).try_normalize()?;
+            let area = 4.0 * u.cross(v).length();
+            Some(
+                cells()
+                    .map(|(a, b)| vpl(c + u * (2.0 * a - 1.0) + v * (2.0 * b - 1.0), n, area / (m * m) as f64))
+                    .collect(),
+            )
+        }
+        LightKind::Disk { center, normal, radius } => {
+            let n = DVec3::from_array(*normal).try_normalize()?;
+            let (t1, t2) = n.any_orthonormal_pair();
+            let c = DVec3::from_array(*center);
+            let area = std::f64::consts::PI * radius * radius;
+            let concentric = |a: f64, b: f64| {
+                let (x, y) = (2.0 * a - 1.0, 2.0 * b - 1.0);
+                let (r, phi) = if x.abs() > y.abs() {
+                    (x, std::f64::consts::FRAC_PI_4 * (y / x))
+                } else {
+                    (y, std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * (x / y))
+                };
+                (t1 * phi.cos() + t2 * phi.sin()) * (r * radius)
+            };
+            Some(cells().map(|(a, b)| vpl(c + concentric(a, b), n, area / (m * m) as f64)).collect())
+        }
+        LightKind::EmissiveMesh { mesh } => {
+            let mesh = scene.meshes.get(*mesh)?;
+            let p = |i: u32| {
+                let v = mesh.positions.get(i as usize).copied().unwrap_or([f32::NAN; 3]);
+                DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))
+            };
+            let tris: Vec<(DVec3, DVec3, DVec3, f64)> = mesh
+                .triangles
+                .iter()
+                .map(|t| (p(t[0]), p(t[1]), p(t[2])))
+                .map(|(a, b, c)| (a, b, c, 0.5 * (b - a).cross(c - a).length()))
+                .filter(|t| t.3.is_finite() && t.3 > 0.0)
+                .collect();
+            let total: f64 = tris.iter().map(|t| t.3).sum();
+            if tris.is_empty() {
+                return Some(Vec::new());
+            }
+            let mut out = Vec::with_capacity(k);
+            let (mut t, mut below) = (0, 0.0);
+            for i in 0..k {
+                let u = (i as f64 + 0.5) / k as f64 * total;
+                while t + 1 < tris.len() && below + tris[t].3 < u {
+                    below += tris[t].3;
+                    t += 1;
+                }
+                let (a, b, c, area) = tris[t];
+                let su = ((u - below) / area).clamp(0.0, 1.0).sqrt();
+                let v = (i as f64 * INV_PHI).fract();
+                let point = a * (1.0 - su) + b * (su * (1.0 - v)) + c * (su * v);
+                let n = (b - a).cross(c - a).normalize();
+                out.push(vpl(point, n, total / k as f64));
+            }
+            Some(out)
+        }
+        _ => None,
+    }
+}
+
 /// Voxelises the scene's global medium over the bounds of its meshes: `voxels` along the longest axis
-/// (others in proportion), or the raw volume's grid when one is given.
+/// (others in proportion), or the raw volume's grid when one is given. Area lights and emissive meshes
+/// become `vpls` VPLs each ([`area_vpls`]; 0: they are skipped).
 ///
 /// # Errors
 /// A message with the fix when the scene has no global medium, more than one, a back-scattering
-/// medium (`g < 0`, which POP does not propagate), no geometry to bound the medium, or no directional,
-/// point, spot or sphere light and no `environment`.
+/// medium (`g < 0`, which POP does not propagate), no geometry to bound the medium, or no light POP
+/// propagates and no `environment`.
 pub fn scene_media(
     scene: &Scene,
     voxels: usize,
     raw: Option<&RawDensity>,
     environment: Option<Environment>,
+    vpls: usize,
 ) -> Result<SceneMedia, String> {
     let file = scene.source.display();
     let globals: Vec<_> = scene.media.iter().filter(|m| m.boundary == Boundary::Global).collect();
@@ -129,6 +218,7 @@ pub fn scene_media(
     let mut light_names = Vec::new();
     let mut points = Vec::new();
     let mut point_names = Vec::new();
+    let mut vpl_sources = Vec::new();
     let mut point = |p: PointLight, name: &str| {
         if p.position.is_finite() && p.intensity.iter().all(|v| v.is_finite() && *v >= 0.0) {
             points.push(p);
@@ -145,9 +235,10 @@ pub fn scene_media(
                 light_names.push(l.name.clone());
                 None
             }
-            LightKind::Point { position } => {
-                point(PointLight { position: DVec3::from_array(*position), intensity: l.radiance, spot: None }, &l.name)
-            }
+            LightKind::Point { position } => point(
+                PointLight { position: DVec3::from_array(*position), intensity: l.radiance, spot: None, normal: None },
+                &l.name,
+            ),
             LightKind::Spot { position, direction, inner_cone, outer_cone } => {
                 match DVec3::from_array(*direction).try_normalize() {
                     Some(axis) => {
@@ -157,6 +248,7 @@ pub fn scene_media(
                             position: DVec3::from_array(*position),
                             intensity: l.radiance,
                             spot: Some(spot),
+                            normal: None,
                         };
                         point(p, &l.name)
                     }
@@ -169,20 +261,34 @@ pub fn scene_media(
                     position: DVec3::from_array(*center),
                     intensity: l.radiance.map(|v| v * area),
                     spot: None,
+                    normal: None,
                 };
                 point(p, &l.name)
             }
-            _ => Some(format!(
-                "light \"{}\": area lights and emissive surfaces need instant-radiosity VPLs (elek2014 Sec. 6), not implemented",
+            _ if vpls == 0 => Some(format!(
+                "light \"{}\": area lights and emissive surfaces become VPLs, and the stage's vpls is 0",
                 l.name
             )),
+            _ => match area_vpls(scene, l, vpls, 1e-4 * (hi - lo).length()) {
+                Some(list) if !list.is_empty() => {
+                    let mut skipped = None;
+                    for (k, p) in list.into_iter().enumerate() {
+                        skipped = skipped.or(point(p, &format!("{} vpl {k}", l.name)));
+                    }
+                    if skipped.is_none() {
+                        vpl_sources.push(l.name.clone());
+                    }
+                    skipped
+                }
+                _ => Some(format!("light \"{}\": a degenerate area light (no area or no normal)", l.name)),
+            },
         };
         skipped.extend(skip);
     }
     if lights.is_empty() && points.is_empty() && environment.is_none() {
         return Err(format!(
-            "{file} has no directional, point, spot or sphere light and the stage no environment map; POP \
-             propagates light from those (add one)"
+            "{file} has no directional, point, spot, sphere or area light (or vpls is 0) and the stage no \
+             environment map; POP propagates light from those (add one)"
         ));
     }
     let coefficients = (m.sigma_s, m.sigma_a, m.g.map(|g| g.min(0.999_999)));
@@ -215,7 +321,60 @@ pub fn scene_media(
         point_names,
         skipped,
         environment,
+        vpl_sources,
     })
+}
+
+/// Per pixel of `cam`: whether its centre ray sees the emitting side of an area light POP propagates as
+/// VPLs before any other surface. The path tracer shows such an emitter's own radiance there, which is
+/// not scattered light, so the comparison leaves those pixels out.
+pub fn sees_vpl_emitter(
+    scene: &Scene,
+    bvh: &SceneBvh,
+    media: &SceneMedia,
+    cam: &crate::effects::ViewCamera,
+) -> Vec<bool> {
+    let sources: Vec<&crate::scene::Light> =
+        scene.lights.iter().filter(|l| media.vpl_sources.contains(&l.name)).collect();
+    (0..cam.width * cam.height)
+        .map(|i| {
+            let d = cam.pixel_dir(i % cam.width, i / cam.width);
+            let o = cam.position;
+            let hit = bvh.closest_hit(&crate::scene::bvh::Ray::new(o.to_array(), d.to_array()));
+            let t_surface = hit.map_or(f64::INFINITY, |h| h.t);
+            sources.iter().any(|l| match l.kind {
+                LightKind::EmissiveMesh { mesh } => {
+                    hit.is_some_and(|h| h.mesh == mesh && DVec3::from_array(h.geometric_normal).dot(d) < 0.0)
+                }
+                LightKind::Rect { center, half_u, half_v, normal } => {
+                    let (c, u, v, n) = (
+                        DVec3::from_array(center),
+                        DVec3::from_array(half_u),
+                        DVec3::from_array(half_v),
+                        DVec3::from_array(normal),
+                    );
+                    plane_hit(o, d, c, n, t_surface).is_some_and(|p| {
+                        (p - c).dot(u).abs() <= u.length_squared() && (p - c).dot(v).abs() <= v.length_squared()
+                    })
+                }
+                LightKind::Disk { center, normal, radius } => {
+                    let c = DVec3::from_array(center);
+                    plane_hit(o, d, c, DVec3::from_array(normal), t_surface).is_some_and(|p| (p - c).length() <= radius)
+                }
+                _ => false,
+            })
+        })
+        .collect()
+}
+
+/// Where the ray `o + t d` meets the front side (facing `n`) of the plane through `c`, before `t_max`.
+fn plane_hit(o: DVec3, d: DVec3, c: DVec3, n: DVec3, t_max: f64) -> Option<DVec3> {
+    let dn = d.dot(n);
+    if dn >= 0.0 {
+        return None;
+    }
+    let t = (c - o).dot(n) / dn;
+    (t > 0.0 && t < t_max).then(|| o + d * t)
 }
 
 /// The scene an independent path tracer must render to give exactly what POP's `scattered` layer
@@ -228,12 +387,28 @@ pub fn scene_media(
 /// wall, between the camera and the room) out of the reference, as POP keeps it out.
 pub fn scattering_reference_scene(scene: &Scene, media: &SceneMedia) -> Scene {
     let mut s = scene.clone();
-    for m in &mut s.materials {
+    // Emissive meshes POP propagates as VPLs keep their emission (and their materials); every other
+    // surface is black and dark.
+    let emitting: Vec<usize> = s
+        .lights
+        .iter()
+        .filter(|l| media.vpl_sources.contains(&l.name))
+        .filter_map(|l| match l.kind {
+            LightKind::EmissiveMesh { mesh } => s.meshes.get(mesh).and_then(|m| m.material),
+            _ => None,
+        })
+        .collect();
+    for (i, m) in s.materials.iter_mut().enumerate() {
         m.base_color = [0.0; 3];
-        m.emission = [0.0; 3];
+        if !emitting.contains(&i) {
+            m.emission = [0.0; 3];
+        }
     }
     let names: Vec<&String> = media.light_names.iter().chain(&media.point_names).collect();
-    s.lights.retain(|l| names.contains(&&l.name) && !matches!(l.kind, LightKind::EmissiveMesh { .. }));
+    s.lights.retain(|l| {
+        media.vpl_sources.contains(&l.name)
+            || (names.contains(&&l.name) && !matches!(l.kind, LightKind::EmissiveMesh { .. }))
+    });
     let margin = 1e-6 * (media.medium.max - media.medium.min).length();
     let (lo, hi) = (media.medium.min - DVec3::splat(margin), media.medium.max + DVec3::splat(margin));
     let corner = |c: usize| {

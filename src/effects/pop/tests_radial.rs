@@ -23,7 +23,7 @@ fn settings(iterations: usize) -> Settings {
 }
 
 fn light(at: DVec3) -> PointLight {
-    PointLight { position: at, intensity: [1.0, 2.0, 0.5], spot: None }
+    PointLight { position: at, intensity: [1.0, 2.0, 0.5], spot: None, normal: None }
 }
 
 /// Uncollided fluence averaged over a shell cell `[a, b]` of an isotropic source `I` in a homogeneous
@@ -222,4 +222,59 @@ fn shells_and_inverse_square_integral_at_extremes() {
     let v = inverse_square_integral(DVec3::new(-1.0, 0.0, 0.0), DVec3::X, 2.0, DVec3::ZERO, 1e-4);
     assert!(v.is_finite() && v > 0.0);
     assert_eq!(inverse_square_integral(DVec3::ZERO, DVec3::X, 0.0, DVec3::Y, 1e-4), 0.0);
+}
+
+#[test]
+fn vpls_carry_the_area_lights_power_and_sit_on_them() {
+    use crate::scene::{Light, LightKind, fixtures};
+    let mut scene = fixtures::fog_room();
+    let rect = LightKind::Rect {
+        center: [1.0, 2.0, 1.0],
+        half_u: [0.5, 0.0, 0.0],
+        half_v: [0.0, 0.0, 0.25],
+        normal: [0.0, -1.0, 0.0],
+    };
+    scene.lights.push(Light { name: "rect".into(), kind: rect, radiance: [2.0, 1.0, 0.5] });
+    let disk = LightKind::Disk { center: [3.0, 2.0, 3.0], normal: [0.0, -2.0, 0.0], radius: 0.3 };
+    scene.lights.push(Light { name: "disk".into(), kind: disk, radiance: [1.0; 3] });
+    let lift = 1e-3;
+    // (light, area, VPLs asked, VPLs made): rect and disk round up to a square; the lamp is a 1 × 0.1 × 1
+    // cuboid emitting from all six faces.
+    for (name, area, k, made) in [("rect", 0.5, 5, 9), ("disk", PI * 0.09, 4, 4), ("/Room/Lamp", 2.4, 7, 7)] {
+        let l = scene.lights.iter().find(|l| l.name == name).unwrap();
+        let v = crate::effects::pop::scene::area_vpls(&scene, l, k, lift).unwrap();
+        assert_eq!(v.len(), made, "{name}");
+        // Intensities along the normals sum to L·A: the VPLs' power π Σ I is the emitter's π L A (the mesh
+        // to its f32 vertices).
+        for c in 0..3 {
+            let sum: f64 = v.iter().map(|p| p.intensity[c]).sum();
+            assert!((sum - l.radiance[c] * area).abs() < 1e-6 * l.radiance[c] * area, "{name} {c}: {sum}");
+        }
+        for p in &v {
+            let n = p.normal.unwrap();
+            assert!((n.length() - 1.0).abs() < 1e-12);
+            // A Lambertian profile: 1 along n, ½ at 60°, 0 behind.
+            let side = n.any_orthonormal_vector();
+            assert!((p.profile(n) - 1.0).abs() < 1e-12 && p.profile(-n) == 0.0);
+            assert!((p.profile(n * 0.5 + side * 0.75f64.sqrt()) - 0.5).abs() < 1e-12);
+            let q = p.position - n * lift;
+            match name {
+                "rect" => assert!((q.x - 1.0).abs() <= 0.5 && (q.y - 2.0).abs() < 1e-12 && (q.z - 1.0).abs() <= 0.25),
+                "disk" => assert!((q - DVec3::new(3.0, 2.0, 3.0)).length() <= 0.3 && (q.y - 2.0).abs() < 1e-12),
+                _ => {
+                    let inside = |v: f64, lo: f64, hi: f64| v >= lo - 1e-6 && v <= hi + 1e-6;
+                    assert!(inside(q.x, 1.5, 2.5) && inside(q.y, 2.9, 3.0) && inside(q.z, 1.5, 2.5), "{q}");
+                    // On a face, with the face's outward normal.
+                    let on_face = [(q.x, 1.5, 2.5, n.x), (q.y, 2.9, 3.0, n.y), (q.z, 1.5, 2.5, n.z)].iter().any(
+                        |&(v, lo, hi, nc)| {
+                            ((v - lo).abs() < 1e-6 && nc < -0.99) || ((v - hi).abs() < 1e-6 && nc > 0.99)
+                        },
+                    );
+                    assert!(on_face, "{q} {n}");
+                }
+            }
+        }
+    }
+    // Not an area light: no VPLs.
+    assert!(crate::effects::pop::scene::area_vpls(&scene, &scene.lights[0], 4, lift).is_none());
 }
