@@ -187,6 +187,8 @@ fn window_room_under_the_bundled_sky() {
     let sum: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("pop_stage/summary.json")).unwrap()).unwrap();
     let env = &sum["environment"];
+    // The preset's importance propagation placed the ordinates (Sec. 5.2).
+    assert_eq!(env["importance"], serde_json::json!(true));
     let ords = env["ordinates"].as_array().unwrap();
     assert!(!ords.is_empty() && ords.len() <= 16, "{}", ords.len());
     let integral = env["integral"][1].as_f64().unwrap();

@@ -253,6 +253,11 @@ pub struct EnvSummary {
     pub integral: [f64; 3],
     /// The ordinates propagated (direction of travel, irradiance, initial anisotropy, cell solid angle).
     pub ordinates: Vec<EnvOrdinate>,
+    /// Whether the ordinates were placed with the camera's importance (Sec. 5.2; the preset's
+    /// `importance`, with `environment_set: "importance"`).
+    pub importance: bool,
+    /// Importance propagation and its projection onto the directions (Fig. 14 "importance") \[ms\].
+    pub importance_ms: f64,
     /// Choosing the ordinates (Fig. 14 "ordinates") \[ms\].
     pub ordinates_ms: f64,
     /// Merging the ordinates' accumulation grids into the medium-aligned grid (Sec. 5.3) \[ms\].
@@ -502,10 +507,26 @@ fn render_environment(
     runs: &mut Vec<LightRun>,
 ) -> Result<(PointFrame, EnvSummary), String> {
     let n = if env.ordinates == 0 { table.def.ordinates as usize } else { env.ordinates };
-    let t0 = Instant::now();
-    let ords = environment::ordinates(&env.map, n, env.set);
-    let ordinates_ms = ms(t0);
     let flow = preset_flow(table);
+    let t0 = Instant::now();
+    let importance = if table.def.importance && env.set == OrdinateSet::Importance {
+        let settings = Settings {
+            iterations: table.def.iterations as usize,
+            residuum: false,
+            switch_iteration: usize::MAX,
+            residuum_iterations: 0,
+            eps_l: table.def.eps_l,
+        };
+        let size = table.def.importance_map.map(|v| v as usize);
+        let n = table.def.importance_grid as usize;
+        Some(environment::importance_map(&media.medium, occluder, cam, &flow, &settings, n, size)?)
+    } else {
+        None
+    };
+    let importance_ms = ms(t0);
+    let t0 = Instant::now();
+    let ords = environment::ordinates_with_importance(&env.map, n, env.set, importance.as_ref());
+    let ordinates_ms = ms(t0);
     let settings = |grid: &Grid| settings_for(table, grid).0;
     let env_opts = environment::EnvOptions {
         dims: table.def.grid.map(|v| v as usize),
@@ -562,6 +583,8 @@ fn render_environment(
         size: [env.map.width, env.map.height],
         integral: env.map.integral(),
         ordinates: ords,
+        importance: importance.is_some(),
+        importance_ms,
         ordinates_ms,
         merge_ms,
     };
@@ -1220,6 +1243,7 @@ impl PopRender {
         let merge_ms = median(&sum(|l| l.merge_ms));
         let march = median(&|f: &PopFrame| f.march_ms);
         let ordinates_ms = median(&|f: &PopFrame| f.environment.as_ref().map_or(0.0, |e| e.ordinates_ms));
+        let importance_ms = median(&|f: &PopFrame| f.environment.as_ref().map_or(0.0, |e| e.importance_ms));
         let merge_ms = merge_ms + median(&|f: &PopFrame| f.environment.as_ref().map_or(0.0, |e| e.merge_ms));
         let l = &runs[0].lights;
         let env_count = l.iter().filter(|r| r.kind == "environment").count();
@@ -1232,14 +1256,14 @@ impl PopRender {
         let iso: usize = l.iter().map(|r| r.isotropic_iterations).sum();
         let (w, h) = (v.gbuffer.camera.width, v.gbuffer.camera.height);
         let mut text = format!(
-            "{id}: elek2014 POP, preset grid {:?}, {}×{}, {} threads (median of 5)\n\n| phase (Fig. 14) | ms |\n|---|---:|\n| importance (Sec. 5.2) | not implemented |\n| ordinates from the environment map (Sec. 5.1) | {ordinates_ms:.2} |\n| lights | {} |\n| grid + medium downsampling | {grid_ms:.2} |\n| initialisation (point lights: depth map + radial sweep) | {init:.2} |\n| propagation ({iters} iterations, {:.3} ms each) | {prop:.2} |\n| residuum ({iso} iterations) | {res:.2} |\n| merge radial and environment grids into the render grid (Sec. 5.3) | {merge_ms:.2} |\n| upsample + ray march | {march:.1} |\n| frame | {:.1} |\n",
+            "{id}: elek2014 POP, preset grid {:?}, {}×{}, {} threads (median of 5)\n\n| phase (Fig. 14) | ms |\n|---|---:|\n| importance propagation + projection (Sec. 5.2) | {importance_ms:.2} |\n| ordinates from the environment map (Sec. 5.1) | {ordinates_ms:.2} |\n| lights | {} |\n| grid + medium downsampling | {grid_ms:.2} |\n| initialisation (point lights: depth map + radial sweep) | {init:.2} |\n| propagation ({iters} iterations, {:.3} ms each) | {prop:.2} |\n| residuum ({iso} iterations) | {res:.2} |\n| merge radial and environment grids into the render grid (Sec. 5.3) | {merge_ms:.2} |\n| upsample + ray march | {march:.1} |\n| frame | {:.1} |\n",
             table.def.grid,
             w,
             h,
             rayon::current_num_threads(),
             names.join(", "),
             prop / iters.max(1) as f64,
-            ordinates_ms + grid_ms + init + prop + res + merge_ms + march
+            importance_ms + ordinates_ms + grid_ms + init + prop + res + merge_ms + march
         );
         // The residuum on a thick, nearly conservative cube.
         let n = table.def.grid.map(|v| v as usize);

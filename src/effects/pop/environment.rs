@@ -1,4 +1,4 @@
-//! Environment lighting for POP (elek2014 Sec. 5.1): a latitude–longitude HDR map → principal ordinates,
+//! Environment lighting for POP (elek2014 Secs. 5.1–5.4): a latitude–longitude HDR map → principal ordinates,
 //! each a distant light with its share of the map's energy and a prefiltered initial anisotropy.
 //!
 //! **Input → output.** An [`EnvMap`] (radiance per texel, read from an EXR or built from a function),
@@ -31,8 +31,9 @@
 //! of `β`. A cell holding one bright texel (a sun) gets `a_n → 1`, a cell of uniform sky a value near
 //! the preset's `ordinate_mean_cosine`. Ordinates whose cell carries no energy are left out.
 //!
-//! **Not implemented.** The importance propagation from the camera (Sec. 5.2): the preset's
-//! `importance` settings are not used yet; the ordinates follow the map alone.
+//! **Importance (Sec. 5.2).** [`importance_map`] propagates importance from the camera and projects it
+//! onto the directions; [`ordinates_with_importance`] then places the ordinates by the product of the map
+//! and the importance (the energies still partition the whole map).
 
 use std::path::Path;
 use std::time::Instant;
@@ -206,9 +207,20 @@ pub struct EnvSampler {
 impl EnvSampler {
     /// The sampler of `env`.
     pub fn new(env: &EnvMap) -> Self {
+        Self::with_importance(env, None)
+    }
+
+    /// The sampler of `env` with each texel's weight multiplied by a directional importance map (any
+    /// size, the same latitude–longitude convention, read at the texel's centre direction; elek2014
+    /// Sec. 5.2).
+    pub fn with_importance(env: &EnvMap, importance: Option<&EnvMap>) -> Self {
         let (w, h) = (env.width, env.height);
-        let weights: Vec<f64> =
-            (0..w * h).map(|i| luminance(env.radiance[i]).max(0.0) * env.texel_solid_angle(i / w)).collect();
+        let weights: Vec<f64> = (0..w * h)
+            .map(|i| {
+                let imp = importance.map_or(1.0, |m| m.lookup(env.texel_direction(i % w, i / w))[0].max(0.0));
+                luminance(env.radiance[i]).max(0.0) * env.texel_solid_angle(i / w) * imp
+            })
+            .collect();
         let total: f64 = weights.iter().sum();
         let four_pi = 4.0 * std::f64::consts::PI;
         let share = if total > 0.0 { UNIFORM_SHARE } else { 1.0 };
@@ -285,11 +297,11 @@ impl EnvOrdinate {
 }
 
 /// The candidate directions (toward the environment) of `set`.
-fn candidates(env: &EnvMap, n: usize, set: OrdinateSet) -> Vec<DVec3> {
+fn candidates(env: &EnvMap, n: usize, set: OrdinateSet, importance: Option<&EnvMap>) -> Vec<DVec3> {
     match set {
         OrdinateSet::Fibonacci => fibonacci_directions(n).into_iter().map(DVec3::from).collect(),
         OrdinateSet::Importance => {
-            let sampler = EnvSampler::new(env);
+            let sampler = EnvSampler::with_importance(env, importance);
             let mut taken = std::collections::BTreeSet::new();
             let mut out = Vec::with_capacity(n);
             // Lattices of N, 2N, 4N, … points until N distinct texels are found (two points in one
@@ -315,7 +327,19 @@ fn candidates(env: &EnvMap, n: usize, set: OrdinateSet) -> Vec<DVec3> {
 
 /// The principal ordinates of `env` (module doc): at most `n`, those with energy, in a fixed order.
 pub fn ordinates(env: &EnvMap, n: usize, set: OrdinateSet) -> Vec<EnvOrdinate> {
-    let dirs = candidates(env, n.max(1), set);
+    ordinates_with_importance(env, n, set, None)
+}
+
+/// [`ordinates`] placed by the product of the map and a directional importance map ([`importance_map`],
+/// elek2014 Sec. 5.2) when `set` is [`OrdinateSet::Importance`]. The energies still partition the whole
+/// map: importance moves the ordinates, it does not weight the light.
+pub fn ordinates_with_importance(
+    env: &EnvMap,
+    n: usize,
+    set: OrdinateSet,
+    importance: Option<&EnvMap>,
+) -> Vec<EnvOrdinate> {
+    let dirs = candidates(env, n.max(1), set, importance);
     let w = env.width;
     // Nearest ordinate of every texel (largest cosine; ties to the lower index), per row in parallel.
     let owner: Vec<usize> = (0..w * env.height)
@@ -473,6 +497,92 @@ pub fn propagate_environment(
         handover_seconds,
         merge_seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// elek2014 Sec. 5.2: how much light arriving from each direction reaches the camera through the medium,
+/// as a latitude–longitude map of `size` texels (grey, normalised to a largest value of 1).
+///
+/// *Importance propagation.* By duality the camera is a light: voltab propagates a unit spot light at
+/// the eye, its cone the view frustum, through `medium` on a radial grid of `n × n` directions and `n`
+/// shells ([`super::radial_propagate::propagate`], the same solver as point lights), which gives the
+/// importance fluence `φ_I(x)` of the camera, uncollided and collided. A point `x` passes light arriving
+/// from `ω` on to the camera in proportion to `W(x) = σ_s(x) φ_I(x)`. *Projection:* on a medium-aligned
+/// grid of `n³` cells, `I(ω) = Σ_x W(x) V(x, ω) T(x, ω)` with `V` the occluder's visibility toward `ω` and
+/// `T` the medium's transmittance to its box (marched in steps of half a cell); texels are their centre
+/// directions. Cells with `W` below 10⁻³ of the largest are skipped. The paper ray-marches its
+/// importance grid the same way; the map is smooth, so a small one suffices (its defaults: 16³ and
+/// 32 × 16).
+pub fn importance_map(
+    medium: &VoxelMedium,
+    occluder: &dyn Occluder,
+    camera: &crate::effects::ViewCamera,
+    flow: &FlowTable,
+    settings: &Settings,
+    n: usize,
+    size: [usize; 2],
+) -> Result<EnvMap, String> {
+    use super::radial::RadialGrid;
+    use super::radial_propagate::{PointLight, Spot, propagate};
+    let n = n.clamp(2, 64);
+    let (w, h) = (size[0].max(1), size[1].max(1));
+    // The frustum's half-diagonal: the smallest cosine between the axis and a corner ray.
+    let corners = [(0, 0), (camera.width - 1, 0), (0, camera.height - 1), (camera.width - 1, camera.height - 1)];
+    let cos_outer = corners.iter().map(|&(x, y)| camera.pixel_dir(x, y).dot(camera.forward)).fold(1.0, f64::min);
+    let eye = PointLight {
+        position: camera.position,
+        intensity: [1.0; 3],
+        spot: Some(Spot { axis: camera.forward, cos_outer: (cos_outer - 1e-3).max(-1.0), inv_range: 1e3 }),
+        normal: None,
+    };
+    let grid = RadialGrid::new(medium, camera.position, n, n, occluder)?;
+    let p = propagate(&grid, medium, &eye, occluder, flow, settings, camera.position);
+    let cells = Grid::medium_aligned(medium, [n; 3])?;
+    let weight: Vec<f64> = (0..cells.len())
+        .map(|i| {
+            let x = cells.center(cells.coords(i));
+            let phi = grid.sample(&p.fluence, x)[1] + grid.sample(&p.uncollided, x)[1];
+            cells.cells[i].sigma_s[1] * phi.max(0.0)
+        })
+        .collect();
+    let top = weight.iter().copied().fold(0.0, f64::max);
+    let used: Vec<(DVec3, f64)> = (0..cells.len())
+        .filter(|&i| weight[i] > 1e-3 * top)
+        .map(|i| (cells.center(cells.coords(i)), weight[i]))
+        .collect();
+    let step = 0.5 * cells.size.iter().copied().fold(f64::INFINITY, f64::min);
+    let sigma_t = medium.sigma_s[1] + medium.sigma_a[1];
+    let map = EnvMap::from_fn(w, h, |dir| {
+        let mut sum = 0.0;
+        for &(x, wt) in &used {
+            if occluder.ray_blocked(x, dir) {
+                continue;
+            }
+            // Optical depth to the box along `dir` (midpoint steps).
+            let exit = box_exit(medium.min, medium.max, x, dir);
+            let steps = (exit / step).ceil().max(1.0) as usize;
+            let dt = exit / steps as f64;
+            let tau: f64 =
+                (0..steps).map(|k| medium.density_at(x + dir * ((k as f64 + 0.5) * dt))).sum::<f64>() * dt * sigma_t;
+            sum += wt * (-tau).exp();
+        }
+        [sum; 3]
+    })?;
+    let top = map.radiance.iter().map(|v| v[0]).fold(0.0, f64::max);
+    let scale = if top > 0.0 { 1.0 / top } else { 0.0 };
+    EnvMap::new(w, h, map.radiance.iter().map(|v| v.map(|c| c * scale)).collect())
+}
+
+/// Distance from `p` inside the box along unit `d` to where it leaves (0 outside).
+fn box_exit(min: DVec3, max: DVec3, p: DVec3, d: DVec3) -> f64 {
+    let mut t = f64::INFINITY;
+    for a in 0..3 {
+        if d[a] > 0.0 {
+            t = t.min((max[a] - p[a]) / d[a]);
+        } else if d[a] < 0.0 {
+            t = t.min((min[a] - p[a]) / d[a]);
+        }
+    }
+    if t.is_finite() { t.max(0.0) } else { 0.0 }
 }
 
 /// A sky for the bundled scenes and the tests: a horizon-to-zenith gradient above (`√up` blend from a pale
