@@ -266,14 +266,7 @@ pub struct EnvSummary {
 
 /// The POP settings of a preset table for a grid (Eq. 10's switch from the medium's mean `σ_s` and `g`).
 pub fn settings_for(table: &PopPresetTable, grid: &Grid) -> (Settings, FlowTable) {
-    let occupied: Vec<f64> = grid
-        .cells
-        .iter()
-        .filter(|c| c.density > 0.0)
-        .map(|c| (c.sigma_s[0] + c.sigma_s[1] + c.sigma_s[2]) / 3.0)
-        .collect();
-    let sigma_s_mean = if occupied.is_empty() { 0.0 } else { occupied.iter().sum::<f64>() / occupied.len() as f64 };
-    let g = (grid.g[0] + grid.g[1] + grid.g[2]) / 3.0;
+    let (sigma_s_mean, g) = crate::effects::pop::grid::Cell::means(&grid.cells, grid.g);
     // The seeds start at a = g (propagate's module doc): the largest anisotropy Eq. 10 starts from.
     preset_settings(table, g, sigma_s_mean, grid.size[2], grid.dims[2])
 }
@@ -428,14 +421,7 @@ pub fn merge_dims(table: &PopPresetTable) -> [usize; 3] {
 /// The iteration settings of a radial grid: Eq. 10 with the mean `σ_s` of its occupied cells and the mean
 /// shell spacing `r_far/S`, at least `S` iterations before the switch.
 pub fn radial_settings(table: &PopPresetTable, grid: &RadialGrid) -> (Settings, FlowTable) {
-    let occupied: Vec<f64> = grid
-        .cells
-        .iter()
-        .filter(|c| c.density > 0.0)
-        .map(|c| (c.sigma_s[0] + c.sigma_s[1] + c.sigma_s[2]) / 3.0)
-        .collect();
-    let sigma_s_mean = if occupied.is_empty() { 0.0 } else { occupied.iter().sum::<f64>() / occupied.len() as f64 };
-    let g = (grid.g[0] + grid.g[1] + grid.g[2]) / 3.0;
+    let (sigma_s_mean, g) = crate::effects::pop::grid::Cell::means(&grid.cells, grid.g);
     let s = grid.shells();
     preset_settings(table, g, sigma_s_mean, grid.radii[s] / s as f64, s)
 }
@@ -869,6 +855,8 @@ pub fn compare_with_reference(
     let n = cam.width * cam.height;
     let mut mean = vec![[0.0f64; 3]; n];
     let mut variance = vec![[0.0f64; 3]; n];
+    // The scene's own surfaces (occluders of the environment, and where the camera sees an emitter).
+    let scene_bvh = (media.environment.is_some() || !media.vpl_sources.is_empty()).then(|| SceneBvh::build(scene));
     if !media.lights.is_empty() || !media.points.is_empty() {
         let ref_scene = pop_scene::scattering_reference_scene(scene, media);
         let bvh = SceneBvh::build(&ref_scene);
@@ -877,17 +865,10 @@ pub fn compare_with_reference(
             variance[i] = se.map(|v| if v.is_finite() { v * v } else { 0.0 });
         }
     }
-    if let Some(env) = &media.environment {
-        let bvh = SceneBvh::build(scene);
+    if let (Some(env), Some(bvh)) = (&media.environment, &scene_bvh) {
         let opts = crate::reference::grid_mc::CameraOptions { samples, seed: 0xe7e, max_events: 100_000 };
-        let r = crate::reference::grid_mc::render_environment(
-            &media.medium,
-            &env.map,
-            &BvhOccluder(&bvh),
-            cam,
-            None,
-            &opts,
-        );
+        let r =
+            crate::reference::grid_mc::render_environment(&media.medium, &env.map, &BvhOccluder(bvh), cam, None, &opts);
         for ((m, v), (s, var)) in mean.iter_mut().zip(&r.radiance).zip(variance.iter_mut().zip(&r.variance)) {
             for c in 0..3 {
                 m[c] += v[c];
@@ -897,10 +878,9 @@ pub fn compare_with_reference(
     }
     let ref_ms = ms(t0);
     // Pixels that see a VPL emitter directly hold its radiance in the reference: both images leave them out.
-    let masked = if media.vpl_sources.is_empty() {
-        vec![false; n]
-    } else {
-        pop_scene::sees_vpl_emitter(scene, &SceneBvh::build(scene), media, cam)
+    let masked = match &scene_bvh {
+        Some(bvh) if !media.vpl_sources.is_empty() => pop_scene::sees_vpl_emitter(scene, bvh, media, cam),
+        _ => vec![false; n],
     };
     let keep = |v: [f64; 3], m: bool| if m { [0.0; 3] } else { v };
     let img = Image {

@@ -70,6 +70,25 @@ pub struct Cell {
     pub density: f64,
 }
 
+impl Cell {
+    /// The cell of `medium` at mean `density`.
+    pub fn at_density(medium: &VoxelMedium, density: f64) -> Self {
+        Cell { sigma_s: medium.sigma_s.map(|v| v * density), sigma_a: medium.sigma_a.map(|v| v * density), density }
+    }
+
+    /// The mean over channels of `σ_s` and of `g`, and of the cells with medium: what Eq. 10's switch
+    /// reads (`(0, ḡ)` when no cell has medium).
+    pub fn means(cells: &[Cell], g: Rgb) -> (f64, f64) {
+        let occupied: Vec<f64> = cells
+            .iter()
+            .filter(|c| c.density > 0.0)
+            .map(|c| (c.sigma_s[0] + c.sigma_s[1] + c.sigma_s[2]) / 3.0)
+            .collect();
+        let sigma_s = if occupied.is_empty() { 0.0 } else { occupied.iter().sum::<f64>() / occupied.len() as f64 };
+        (sigma_s, (g[0] + g[1] + g[2]) / 3.0)
+    }
+}
+
 /// A propagation grid aligned with a light direction.
 #[derive(Debug, Clone)]
 pub struct Grid {
@@ -237,11 +256,7 @@ impl Grid {
                     }
                 }
                 density *= inv;
-                Cell {
-                    sigma_s: medium.sigma_s.map(|v| v * density),
-                    sigma_a: medium.sigma_a.map(|v| v * density),
-                    density,
-                }
+                Cell::at_density(medium, density)
             })
             .collect()
     }

@@ -245,11 +245,7 @@ impl RadialGrid {
                     }
                 }
                 density /= (s * s * s) as f64;
-                Cell {
-                    sigma_s: medium.sigma_s.map(|v| v * density),
-                    sigma_a: medium.sigma_a.map(|v| v * density),
-                    density,
-                }
+                Cell::at_density(medium, density)
             })
             .collect()
     }
