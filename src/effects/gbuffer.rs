@@ -80,7 +80,8 @@ pub fn render(scene: &Scene, bvh: &SceneBvh, cam: &ViewCamera, opts: &ColourOpti
         max_depth: opts.bounces,
         rr_depth: opts.bounces.max(1),
         seed: opts.seed,
-        surface_bounces: true,
+        surface_bounces: u32::MAX,
+        eye_surfaces: true,
         media: false,
     };
     let (est, _) = volpath::radiance(scene, bvh, &rays, &vp);

@@ -218,7 +218,8 @@ pub fn path_trace_pixels(
         max_depth: depth,
         rr_depth: 4,
         seed: if media { 0x5eed } else { 0x5eed ^ 1 },
-        surface_bounces: true,
+        surface_bounces: u32::MAX,
+        eye_surfaces: true,
         media,
     };
     let (est, _) = volpath::radiance(scene, bvh, &rays, &opts);

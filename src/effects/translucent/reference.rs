@@ -1008,7 +1008,8 @@ mod tests {
             max_depth: 1000,
             rr_depth: 8,
             seed: 5,
-            surface_bounces: true,
+            surface_bounces: u32::MAX,
+            eye_surfaces: true,
             media: true,
         };
         let (est, stats) = volpath::radiance(&s, &bvh, &rays, &vo);

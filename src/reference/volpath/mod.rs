@@ -50,9 +50,13 @@
 //!   through the fog (shadow-ray transmittance). `max_depth = n` adds `n` further events (diffuse
 //!   bounces, multiple scattering, specular events: a dielectric slab needs two), so large values
 //!   with `media = true` give fog with single and multiple scattering and global illumination.
-//! - `surface_bounces = false`: the surfaces the camera ray itself meets (its first Lambertian hit,
+//! - `surface_bounces = 0`: the surfaces the camera ray itself meets (its first Lambertian hit,
 //!   also behind index-matched boundaries and Fresnel interfaces on that first flight) are still
-//!   shaded; light reflected or transmitted by any later surface is ignored.
+//!   shaded; light reflected or transmitted by any later surface is ignored. `surface_bounces = n`
+//!   lets `n` later Lambertian reflections through (`u32::MAX`: all).
+//! - `eye_surfaces = false`: that first Lambertian hit absorbs instead of being shaded: the image is
+//!   the light scattered by the media toward the eye (plus emitters seen directly), e.g. what a
+//!   volumetric effect adds on top of a surface renderer.
 //! - `media = false`: media are ignored (vacuum), as for irradiance.
 //! - Russian roulette survival is measured against a throughput of 1 (not `π` as at a receiver).
 //!
@@ -124,16 +128,29 @@ pub struct VolPathOptions {
     pub rr_depth: u32,
     /// Seed, hashed into the stream key.
     pub seed: u64,
-    /// `false`: light reflected or transmitted by surfaces is ignored (emitters and media only), except
-    /// at the surfaces a camera ray itself meets, which are always shaded.
-    pub surface_bounces: bool,
+    /// Most Lambertian reflections per path after vertex 0, not counting the surface a camera ray itself
+    /// meets: `u32::MAX` all, `0` light reflected or transmitted by surfaces is ignored (emitters and
+    /// media only). Once used up, flights end at the next surface after gathering its emission.
+    pub surface_bounces: u32,
+    /// `false`: the Lambertian surface a camera ray itself meets absorbs (the path ends there, its
+    /// emission still gathered), so the image holds the light the media scatter toward the eye and
+    /// what emitters show directly; `true`: it is shaded. Irrelevant for receivers.
+    pub eye_surfaces: bool,
     /// `false`: media are ignored (vacuum).
     pub media: bool,
 }
 
 impl Default for VolPathOptions {
     fn default() -> Self {
-        VolPathOptions { samples: 1024, max_depth: 64, rr_depth: 8, seed: 0, surface_bounces: true, media: true }
+        VolPathOptions {
+            samples: 1024,
+            max_depth: 64,
+            rr_depth: 8,
+            seed: 0,
+            surface_bounces: u32::MAX,
+            eye_surfaces: true,
+            media: true,
+        }
     }
 }
 

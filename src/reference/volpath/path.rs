@@ -48,8 +48,9 @@
 //! last one still gathers emission (so the MIS pair is complete) but produces no vertex, takes no
 //! specular event and samples no equiangular distances. Russian roulette from vertex `rr_depth` on
 //! (`rr_depth + 1` for camera rays), with survival `min(1, max_c w_c/u)`, `u` the throughput of an
-//! unabsorbed path (`π` at a receiver, 1 from an eye). With `surface_bounces` off, flights end at
-//! surfaces after gathering their emission, except the eye's own flight.
+//! unabsorbed path (`π` at a receiver, 1 from an eye). Once `surface_bounces` Lambertian vertices have
+//! been made (the eye's own hit not counted), flights end at surfaces after gathering their emission,
+//! except the eye's own flight; with `eye_surfaces` off that flight ends at its Lambertian hit.
 
 use std::f64::consts::PI;
 
@@ -168,6 +169,8 @@ struct State {
     beta: [f64; 3],
     /// Unidirectional pdfs per channel over the hero's.
     r_u: [f64; 3],
+    /// Lambertian reflections so far, not counting the surface the eye's own flight meets.
+    reflections: u32,
 }
 
 impl State {
@@ -302,7 +305,7 @@ impl<'a> Context<'a> {
     pub fn trace(&self, start: Start, stream: SampleStream, rays: &mut u64) -> [f64; 3] {
         let mut draws = Draws::new(stream);
         let hero = ((draws.draw() * 3.0) as usize).min(2);
-        let mut st = State { hero, beta: [1.0; 3], r_u: [1.0; 3] };
+        let mut st = State { hero, beta: [1.0; 3], r_u: [1.0; 3], reflections: 0 };
         let mut out = [0.0; 3];
         // A camera path's vertex 0 is the eye, so its user-facing vertex indices start at 1.
         let (mut vertex, camera) = match start {
@@ -459,7 +462,8 @@ impl<'a> Context<'a> {
     ) -> Option<Vertex> {
         let (mut origin, mut dir) = (leg.origin, leg.dir);
         // The eye's own flight meets surfaces whatever `surface_bounces` says: they are what it sees.
-        let surfaces = self.opts.surface_bounces || (budget.camera && *depth == 0);
+        let eye_flight = budget.camera && *depth == 0;
+        let surfaces = st.reflections < self.opts.surface_bounces || eye_flight;
         *depth += 1;
         loop {
             // `*depth` is the index of the vertex this straight flight may produce.
@@ -515,6 +519,13 @@ impl<'a> Context<'a> {
             let side = if dir.dot(ng) < 0.0 { ng } else { -ng };
             match self.kinds[hit.mesh] {
                 SurfaceKind::Lambert(k) => {
+                    if eye_flight {
+                        if !self.opts.eye_surfaces {
+                            return None;
+                        }
+                    } else {
+                        st.reflections += 1;
+                    }
                     return (!last).then_some(Vertex::Surface { p, o: p + side * self.eps(p), n: side, k });
                 }
                 SurfaceKind::PassThrough => return None, // `closest` never reports these

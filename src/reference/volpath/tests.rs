@@ -9,7 +9,15 @@ use crate::scene::fixtures::{cuboid, empty, fog_room, point_light};
 use crate::scene::{Boundary, Density, Light, LightKind, Material, Medium, Mesh, Surface};
 
 fn opts(samples: u32) -> VolPathOptions {
-    VolPathOptions { samples, max_depth: 64, rr_depth: 8, seed: 7, surface_bounces: true, media: true }
+    VolPathOptions {
+        samples,
+        max_depth: 64,
+        rr_depth: 8,
+        seed: 7,
+        surface_bounces: u32::MAX,
+        eye_surfaces: true,
+        media: true,
+    }
 }
 
 fn run(scene: &Scene, points: &[SurfacePoint], o: &VolPathOptions) -> Vec<Estimate> {
@@ -55,7 +63,7 @@ fn point_light_in_vacuum_is_inverse_square() {
         pt([1.0, 0.5, 0.0], [-tilt, tilt, 0.0]),
         pt([1.0, 0.5, 0.0], [tilt, -tilt, 0.0]), // faces away: 0
     ];
-    let e = run(&s, &points, &VolPathOptions { media: false, surface_bounces: false, ..opts(16) });
+    let e = run(&s, &points, &VolPathOptions { media: false, surface_bounces: 0, ..opts(16) });
     for (p, est) in points.iter().zip(&e) {
         let d: Vec<f64> = (0..3).map(|c| light[c] - p.position[c]).collect();
         let r2 = d.iter().map(|x| x * x).sum::<f64>();
@@ -386,4 +394,46 @@ fn fog_room_throughput() {
         e[27].stderr
     );
     assert!(rate > 0.0 && e.iter().all(|x| x.mean[0].is_finite()));
+}
+
+/// `surface_bounces = 1` in vacuum between a floor and a ceiling (albedo `k`, 6 m × 6 m, 1 m apart), a
+/// point light `I` at height `a`: the irradiance at the floor's centre is the direct `I/a²` plus one
+/// reflection off the ceiling, `∫ k/π · I (h−a)/d³ · h²/r⁴ dA` over the ceiling (`d`, `r` the distances
+/// of a ceiling point to the light and to the receiver), by a 1200² midpoint rule (smooth integrand).
+/// `surface_bounces = 0` gives the direct term exactly; all bounces (floor–ceiling–floor) give more.
+#[test]
+fn surface_bounces_counts_reflections() {
+    let (k, h, a, i, half) = (0.7, 1.0, 0.5, 1.0, 3.0);
+    let mut s = empty("bounces.usda");
+    s.materials.push(material(k, 0.0, Surface::Opaque));
+    for (name, lo, hi) in [("Floor", -0.1f32, 0.0f32), ("Ceiling", 1.0, 1.1)] {
+        let mut m = cuboid(name, [-3.0, lo, -3.0], [3.0, hi, 3.0]);
+        m.material = Some(0);
+        s.meshes.push(m);
+    }
+    s.lights.push(point_light("Bulb", [0.0, a, 0.0], i));
+    let receiver = [pt([0.0, 0.0, 0.0], [0.0, 1.0, 0.0])];
+    let direct = i / (a * a);
+    let n = 1200;
+    let du = 2.0 * half / n as f64;
+    let mut bounce = 0.0;
+    for y in 0..n {
+        for x in 0..n {
+            let (u, v) = (-half + (x as f64 + 0.5) * du, -half + (y as f64 + 0.5) * du);
+            let rho2 = u * u + v * v;
+            let d = (rho2 + (h - a) * (h - a)).sqrt();
+            let r2 = rho2 + h * h;
+            bounce += k / PI * i * (h - a) / (d * d * d) * h * h / (r2 * r2) * du * du;
+        }
+    }
+    let zero = run(&s, &receiver, &VolPathOptions { media: false, surface_bounces: 0, ..opts(64) });
+    assert!(close(zero[0].mean, [direct; 3], 1e-12), "{:?} vs {direct}", zero[0].mean);
+    let one = run(&s, &receiver, &VolPathOptions { media: false, surface_bounces: 1, ..opts(40_000) });
+    let exact = direct + bounce;
+    for c in 0..3 {
+        let dev = (one[0].mean[c] - exact).abs();
+        assert!(dev <= 4.0 * one[0].stderr[c] && dev <= 0.01 * exact, "{:?} vs {exact} (bounce {bounce})", one[0]);
+    }
+    let all = run(&s, &receiver, &VolPathOptions { media: false, ..opts(40_000) });
+    assert!(all[0].mean[0] > one[0].mean[0] + 5.0 * (all[0].stderr[0] + one[0].stderr[0]), "{:?}", all[0]);
 }

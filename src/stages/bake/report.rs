@@ -124,7 +124,15 @@ pub fn reference(
 ) -> (Vec<[f64; 3]>, f64, f64) {
     let sp: Vec<SurfacePoint> =
         points.iter().map(|p| SurfacePoint { position: p.position, normal: p.normal }).collect();
-    let opts = VolPathOptions { samples, max_depth: 64, rr_depth: 4, seed, surface_bounces: true, media: true };
+    let opts = VolPathOptions {
+        samples,
+        max_depth: 64,
+        rr_depth: 4,
+        seed,
+        surface_bounces: u32::MAX,
+        eye_surfaces: true,
+        media: true,
+    };
     let t0 = Instant::now();
     let (est, _) = volpath::irradiance(scene, bvh, &sp, &opts);
     let ms = t0.elapsed().as_secs_f64() * 1e3;
