@@ -75,6 +75,12 @@ crate::declare_params! {
         /// lights on radial grids, each an equal share of the emitter's area (rect and disk lights round
         /// up to a square number); 0 skips area lights.
         vpls: u32 = 4, unit = "VPLs per emitter", range = "0 to 256";
+        /// VPLs for the direct light the scene's surfaces reflect into the medium (instant radiosity from
+        /// reflective shadow maps of every light, elek2014 Sec. 6), placed over all maps in proportion
+        /// to the reflected flux; 0: surfaces only occlude.
+        surface_vpls: u32 = 32, unit = "VPLs", range = "0 to 1024";
+        /// Texels per side of each light's reflective shadow map (used when surface_vpls > 0).
+        rsm_size: u32 = 64, unit = "texels", range = "1 to 1024";
         /// Latitude-longitude HDR environment map (EXR with R, G, B; row 0 up, centre column toward +Z)
         /// lighting the medium through principal ordinates (elek2014 Sec. 5), relative to the pipeline
         /// file; empty: none.
@@ -206,6 +212,8 @@ pub struct PopSummary {
     pub reference: Option<ReferenceComparison>,
     /// The environment lighting (when `environment` is given).
     pub environment: Option<EnvSummary>,
+    /// The VPLs of the surfaces' reflected light (when `surface_vpls > 0`): maps, VPLs, flux, time.
+    pub reflection: Option<pop_scene::Reflection>,
 }
 
 /// POP's scattered light against an independent path-traced image of it.
@@ -465,7 +473,23 @@ fn render_points(
     }
     let t0 = Instant::now();
     let merged = Grid::medium_aligned(&media.medium, merge_dims(table))?;
-    let sources: Vec<(&RadialGrid, &[[f64; 3]])> = grids.iter().map(|(g, p)| (g, p.toward_eye.as_slice())).collect();
+    // The VPLs of reflected light (the last points) bring their uncollided light through the grid too.
+    let reflected = media.points.len() - media.reflection.as_ref().map_or(0, |r| r.vpls);
+    let fields: Vec<std::borrow::Cow<'_, [[f64; 3]]>> = grids
+        .iter()
+        .enumerate()
+        .map(|(i, (g, p))| match i >= reflected {
+            true => {
+                let direct = radial_propagate::uncollided_toward_eye(g, p, cam.position);
+                std::borrow::Cow::Owned(
+                    p.toward_eye.iter().zip(direct).map(|(a, b)| [0, 1, 2].map(|c| a[c] + b[c])).collect(),
+                )
+            }
+            false => std::borrow::Cow::Borrowed(p.toward_eye.as_slice()),
+        })
+        .collect();
+    let sources: Vec<(&RadialGrid, &[[f64; 3]])> =
+        grids.iter().zip(&fields).map(|((g, _), f)| (g, f.as_ref())).collect();
     let merged_field = merge::merge(&merged, &sources);
     let merge_ms = ms(t0);
     // The merge is shared; each light is charged its share.
@@ -474,7 +498,8 @@ fn render_points(
         r.merge_ms = merge_ms / grids.len() as f64;
     }
     let t0 = Instant::now();
-    let lights: Vec<(&RadialGrid, &radial_propagate::RadialPropagation)> = grids.iter().map(|(g, p)| (g, p)).collect();
+    let lights: Vec<(&RadialGrid, &radial_propagate::RadialPropagation)> =
+        grids.iter().take(reflected).map(|(g, p)| (g, p)).collect();
     let frame = merge::march_points(&merged, &merged_field, &lights, &media.medium, cam, Some(distance), opts);
     Ok(PointFrame { frame, march_ms: ms(t0) })
 }
@@ -623,6 +648,16 @@ impl PopRender {
                 "use 0 to 1e6 (1 keeps the map's radiance)",
             );
         }
+        if self.surface_vpls > 1024 {
+            issue(
+                "surface_vpls",
+                format!("surface_vpls = {}", self.surface_vpls),
+                "use 0 (surfaces only occlude) to 1024 VPLs",
+            );
+        }
+        if !(1..=1024).contains(&self.rsm_size) {
+            issue("rsm_size", format!("rsm_size = {}", self.rsm_size), "use 1 to 1024 texels per side");
+        }
         if self.vpls > 256 {
             issue("vpls", format!("vpls = {}", self.vpls), "use 0 (skip area lights) to 256 VPLs per emitter");
         }
@@ -670,8 +705,9 @@ impl PopRender {
         PopPresetTable::open(&path).map_err(|e| StageError::Table { stage: id.into(), path, message: e.to_string() })
     }
 
-    /// The scene's media for POP (voxelised, with the raw or EXR-slice density when given).
-    pub fn media(&self, id: &str, ctx: &StageContext, scene: &Scene) -> Result<SceneMedia, StageError> {
+    /// The scene's media for POP (voxelised, with the raw or EXR-slice density when given), with the
+    /// VPLs of the surfaces' reflected light when `surface_vpls > 0`.
+    pub fn media(&self, id: &str, ctx: &StageContext, scene: &Scene, bvh: &SceneBvh) -> Result<SceneMedia, StageError> {
         let fail = |message: String| StageError::Input {
             stage: id.into(),
             message,
@@ -709,7 +745,11 @@ impl PopRender {
                 set: self.ordinate_set().unwrap_or(OrdinateSet::Importance),
             })
         };
-        pop_scene::scene_media(scene, self.voxels as usize, raw.as_ref(), environment, self.vpls as usize).map_err(fail)
+        let mut media =
+            pop_scene::scene_media(scene, self.voxels as usize, raw.as_ref(), environment, self.vpls as usize)
+                .map_err(fail)?;
+        pop_scene::add_reflection_vpls(&mut media, scene, bvh, self.surface_vpls as usize, self.rsm_size as usize);
+        Ok(media)
     }
 
     /// The ordinate set named by `environment_set`.
@@ -728,7 +768,7 @@ impl PopRender {
         let table = self.open_table(id, ctx)?;
         let v = fields.load(id, ctx, None)?;
         let t0 = Instant::now();
-        let media = self.media(id, ctx, &v.scene)?;
+        let media = self.media(id, ctx, &v.scene, &v.bvh)?;
         let voxel_ms = ms(t0);
         let g = &v.gbuffer;
         let distance: Vec<f64> = g.distance.data.iter().map(|&d| f64::from(d)).collect();
@@ -766,6 +806,7 @@ impl PopRender {
             fig12,
             reference: self.reference(id, ctx, &table, &media, &dir, &mut outputs)?,
             environment: frame.environment.clone(),
+            reflection: media.reflection.clone(),
         };
         outputs.push(view::write_json(id, &dir.join("summary.json"), &summary)?);
         let prop_ms: f64 = frame.lights.iter().map(|l| l.phases_ms.propagation + l.phases_ms.residuum).sum();
@@ -860,7 +901,16 @@ pub fn compare_with_reference(
     if !media.lights.is_empty() || !media.points.is_empty() {
         let ref_scene = pop_scene::scattering_reference_scene(scene, media);
         let bvh = SceneBvh::build(&ref_scene);
-        for (i, (m, se)) in view::path_trace_pixels(&ref_scene, &bvh, cam, samples, 256, true).into_iter().enumerate() {
+        let opts = crate::reference::volpath::VolPathOptions {
+            samples,
+            max_depth: 256,
+            rr_depth: 4,
+            seed: 0x5eed,
+            surface_bounces: pop_scene::reference_bounces(media),
+            eye_surfaces: false,
+            media: true,
+        };
+        for (i, (m, se)) in view::path_trace_pixels_with(&ref_scene, &bvh, cam, &opts).into_iter().enumerate() {
             mean[i] = m.map(|v| if v.is_finite() { v } else { 0.0 });
             variance[i] = se.map(|v| if v.is_finite() { v * v } else { 0.0 });
         }
@@ -1200,7 +1250,7 @@ impl PopRender {
         let fields = self.fields();
         let table = self.open_table(id, ctx)?;
         let v = fields.load(id, ctx, None)?;
-        let media = self.media(id, ctx, &v.scene)?;
+        let media = self.media(id, ctx, &v.scene, &v.bvh)?;
         let distance: Vec<f64> = v.gbuffer.distance.data.iter().map(|&d| f64::from(d)).collect();
         let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
         let mut runs = Vec::new();
@@ -1300,7 +1350,7 @@ impl PopRender {
         let fields = self.fields();
         let table = self.open_table(id, ctx)?;
         let v = fields.load(id, ctx, None)?;
-        let media = self.media(id, ctx, &v.scene)?;
+        let media = self.media(id, ctx, &v.scene, &v.bvh)?;
         let distance: Vec<f64> = v.gbuffer.distance.data.iter().map(|&d| f64::from(d)).collect();
         let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
         let cam = &v.gbuffer.camera;

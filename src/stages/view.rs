@@ -208,12 +208,7 @@ pub fn path_trace_pixels(
     depth: u32,
     media: bool,
 ) -> Vec<([f64; 3], [f64; 3])> {
-    use crate::reference::volpath::{self, CameraRay, VolPathOptions};
-    let rays: Vec<CameraRay> = (0..cam.height)
-        .flat_map(|y| (0..cam.width).map(move |x| (x, y)))
-        .map(|(x, y)| CameraRay { origin: cam.position.to_array(), direction: cam.pixel_dir(x, y).to_array() })
-        .collect();
-    let opts = VolPathOptions {
+    let opts = crate::reference::volpath::VolPathOptions {
         samples,
         max_depth: depth,
         rr_depth: 4,
@@ -222,7 +217,23 @@ pub fn path_trace_pixels(
         eye_surfaces: true,
         media,
     };
-    let (est, _) = volpath::radiance(scene, bvh, &rays, &opts);
+    path_trace_pixels_with(scene, bvh, cam, &opts)
+}
+
+/// Per pixel of `cam` (row-major), the path-traced radiance through the pixel's centre and its standard
+/// error with any [`VolPathOptions`](crate::reference::volpath::VolPathOptions).
+pub fn path_trace_pixels_with(
+    scene: &Scene,
+    bvh: &SceneBvh,
+    cam: &ViewCamera,
+    opts: &crate::reference::volpath::VolPathOptions,
+) -> Vec<([f64; 3], [f64; 3])> {
+    use crate::reference::volpath::{self, CameraRay};
+    let rays: Vec<CameraRay> = (0..cam.height)
+        .flat_map(|y| (0..cam.width).map(move |x| (x, y)))
+        .map(|(x, y)| CameraRay { origin: cam.position.to_array(), direction: cam.pixel_dir(x, y).to_array() })
+        .collect();
+    let (est, _) = volpath::radiance(scene, bvh, &rays, opts);
     est.iter().map(|e| (e.mean, e.stderr)).collect()
 }
 

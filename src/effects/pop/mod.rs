@@ -13,6 +13,7 @@
 //! | [`propagate`] | Sec. 4.1 sweep, Eqs. 2–6 iterations, Eqs. 7–8 accumulation, Sec. 5.4 residuum |
 //! | [`render`] | Sec. 4.4 joint-bilateral upsampling and front-to-back ray marching |
 //! | [`environment`] | Secs. 5.1, 5.3, 5.4: environment maps → ordinates with prefiltered lobes, merged grids and residuum |
+//! | [`rsm`] | Sec. 6 instant radiosity: reflective shadow maps of the primary lights → VPLs for the surfaces' reflected light |
 //!
 //! Where voltab departs from the paper (the exact uncollided beam and first-scattering seed instead
 //! of propagating `L_in T_i` from every cell; the phase convolution in the accumulation) is stated in
@@ -28,6 +29,7 @@ pub mod propagate;
 pub mod radial;
 pub mod radial_propagate;
 pub mod render;
+pub mod rsm;
 pub mod scene;
 
 #[cfg(test)]

@@ -342,6 +342,24 @@ pub fn propagate(
     }
 }
 
+/// The light's uncollided single scattering toward an eye at `eye` per unit `σ_s`, per cell: the cell's
+/// mean uncollided fluence times `f_hg(d_i·ω_eye, g)` (the uncollided light crosses the cell along its
+/// radial direction `d_i`). Cell means keep the power exact and have no `1/r²` singularity: this is how
+/// the ray marcher takes the uncollided light of a VPL (elek2014 Sec. 6 clamps VPLs' singularities;
+/// this "clamp" is at the grid's resolution and loses no energy), where [`PointDirect`] integrates a
+/// true point light's analytically.
+pub fn uncollided_toward_eye(grid: &RadialGrid, p: &RadialPropagation, eye: DVec3) -> Vec<Rgb> {
+    let na = grid.angular();
+    p.uncollided
+        .par_iter()
+        .enumerate()
+        .map(|(c, f)| {
+            let u = grid.dirs[c % na].dot((eye - grid.center(c)).normalize_or_zero());
+            [0, 1, 2].map(|ch| f[ch] * hg::phase(u, grid.g[ch]))
+        })
+        .collect()
+}
+
 /// One gathering iteration on the radial links (Eqs. 2–6 with powers). `a = None`: isotropic residuum.
 pub fn step(grid: &RadialGrid, flow: &FlowTable, p: &[Rgb], a: Option<&[Rgb]>) -> (Vec<Rgb>, Vec<Rgb>) {
     let iso = flow.lookup(0.0);

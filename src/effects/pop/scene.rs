@@ -55,6 +55,53 @@ pub struct SceneMedia {
     pub environment: Option<Environment>,
     /// The area lights and emissive meshes propagated as VPLs (their names in the scene).
     pub vpl_sources: Vec<String>,
+    /// The VPLs standing for light reflected by the scene's surfaces, when added
+    /// ([`add_reflection_vpls`]; they are among [`SceneMedia::points`]).
+    pub reflection: Option<Reflection>,
+}
+
+/// What [`add_reflection_vpls`] added.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Reflection {
+    /// Reflective shadow maps rendered (one per primary light).
+    pub maps: usize,
+    /// Texels per side of each map.
+    pub side: usize,
+    /// VPLs added.
+    pub vpls: usize,
+    /// Flux the surfaces reflect per channel \[W\], the VPLs' total.
+    pub flux: [f64; 3],
+    /// Time to render the maps and place the VPLs \[ms\].
+    pub ms: f64,
+}
+
+/// Adds `k` VPLs for the direct light the scene's surfaces reflect into the medium (elek2014 Sec. 6:
+/// reflective shadow maps of every primary light — directional lights and point lights, area lights'
+/// VPLs included — importance-sampled by reflected flux; [`super::rsm`]) to `media.points`, named
+/// `surfaces vpl j`, each lifted off its surface like the area lights' VPLs. `k = 0` adds nothing and
+/// leaves [`SceneMedia::reflection`] `None`.
+pub fn add_reflection_vpls(media: &mut SceneMedia, scene: &Scene, bvh: &SceneBvh, k: usize, side: usize) {
+    if k == 0 {
+        return;
+    }
+    let t0 = std::time::Instant::now();
+    let albedo = super::rsm::albedos(scene, bvh);
+    let m = &media.medium;
+    let mut maps: Vec<_> = media.lights.iter().map(|l| super::rsm::directional_rsm(&albedo, bvh, m, l, side)).collect();
+    maps.extend(media.points.iter().map(|l| super::rsm::point_rsm(&albedo, bvh, m, l, side)));
+    let lift = 1e-4 * (m.max - m.min).length();
+    let vpls = super::rsm::sample_vpls(&maps, k, lift);
+    media.reflection = Some(Reflection {
+        maps: maps.len(),
+        side,
+        vpls: vpls.len(),
+        flux: super::rsm::total_flux(&maps),
+        ms: t0.elapsed().as_secs_f64() * 1e3,
+    });
+    for (j, p) in vpls.into_iter().enumerate() {
+        media.points.push(p);
+        media.point_names.push(format!("surfaces vpl {j}"));
+    }
 }
 
 /// An environment map and how to split it into principal ordinates.
@@ -322,6 +369,7 @@ pub fn scene_media(
         skipped,
         environment,
         vpl_sources,
+        reflection: None,
     })
 }
 
@@ -377,18 +425,24 @@ fn plane_hit(o: DVec3, d: DVec3, c: DVec3, n: DVec3, t_max: f64) -> Option<DVec3
     (t > 0.0 && t < t_max).then(|| o + d * t)
 }
 
+/// The surface reflections the path-traced reference of [`scattering_reference_scene`] lets through:
+/// one when POP propagates the surfaces' reflected light as VPLs ([`add_reflection_vpls`]), else none.
+pub fn reference_bounces(media: &SceneMedia) -> u32 {
+    u32::from(media.reflection.as_ref().is_some_and(|r| r.vpls > 0))
+}
+
 /// The scene an independent path tracer must render to give exactly what POP's `scattered` layer
 /// holds: the light the medium scatters toward the eye from the lights POP propagates, attenuated on the
-/// way. Surfaces become black absorbers (POP's surfaces only occlude) with no emission, lights POP skips
-/// are removed, and the global medium is confined to POP's medium box: it becomes the medium of a closed,
+/// way. Surfaces keep their albedo but emit nothing (the tracer is run with `eye_surfaces = false`, so
+/// the surfaces the eye sees absorb, and `surface_bounces` 0, or 1 when POP propagates reflected light
+/// as VPLs: [`reference_bounces`]), lights POP skips are removed, and the global medium is confined to POP's medium box: it becomes the medium of a closed,
 /// index-matched box mesh (no material, so rays pass its faces unbent) `1e-6` of the box diagonal larger
 /// than the box, so its faces never coincide with the walls they enclose. voltab's path tracer fills all
 /// space with a global medium; the box keeps fog outside the scene's bounds (e.g. in front of an open
 /// wall, between the camera and the room) out of the reference, as POP keeps it out.
 pub fn scattering_reference_scene(scene: &Scene, media: &SceneMedia) -> Scene {
     let mut s = scene.clone();
-    // Emissive meshes POP propagates as VPLs keep their emission (and their materials); every other
-    // surface is black and dark.
+    // Emissive meshes POP propagates as VPLs keep their emission; every other surface is dark.
     let emitting: Vec<usize> = s
         .lights
         .iter()
@@ -399,7 +453,6 @@ pub fn scattering_reference_scene(scene: &Scene, media: &SceneMedia) -> Scene {
         })
         .collect();
     for (i, m) in s.materials.iter_mut().enumerate() {
-        m.base_color = [0.0; 3];
         if !emitting.contains(&i) {
             m.emission = [0.0; 3];
         }
