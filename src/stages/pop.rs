@@ -1,6 +1,8 @@
 //! `PopRender`: scene + `PopPreset` table (+ an environment map) → elek2014 Principal-Ordinates
 //! Propagation of the scene's global medium lit by its directional lights (Sec. 4), its point, spot and
-//! sphere lights (radial grids, Sec. 6) and the environment's principal ordinates (Sec. 5), ray-marched
+//! sphere lights (radial grids, Sec. 6), its area lights and the light its surfaces reflect (VPLs from
+//! the emitters and from reflective shadow maps, Sec. 6) and the environment's principal ordinates
+//! (Sec. 5), ray-marched
 //! into an EXR + PNG, with an optional comparison against brute-force volumetric path tracing.
 //!
 //! **Input.** A scene file (relative to the pipeline file) with a perspective camera, one global

@@ -4,9 +4,10 @@
 //! **Input → output.** [`Scene`] + BVH + a voxel resolution (+ an optional raw density volume that
 //! multiplies the medium's density, the first heterogeneous input) → [`SceneMedia`]: directional lights
 //! (rectilinear grids, Sec. 4) and point, spot and sphere lights (radial grids, Sec. 6; a sphere light
-//! counts as a point of intensity `L π r²`, the scene convention for `treatAsPoint`). Rect, disk and
-//! emissive-mesh lights would need elek2014's instant-radiosity VPLs, which voltab does not have: they
-//! are listed in [`SceneMedia::skipped`], never silently dropped.
+//! counts as a point of intensity `L π r²`, the scene convention for `treatAsPoint`); rect, disk and
+//! emissive-mesh lights as instant-radiosity VPLs ([`area_vpls`]; with `vpls = 0` they are listed in
+//! [`SceneMedia::skipped`], never silently dropped); and, with the BVH, VPLs for the light the surfaces
+//! reflect ([`add_reflection_vpls`], from reflective shadow maps, [`super::rsm`]).
 
 use glam::DVec3;
 
