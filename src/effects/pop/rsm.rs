@@ -41,8 +41,8 @@ use super::grid::Rgb;
 use super::medium::{DirectionalLight, VoxelMedium};
 use super::octa;
 use super::radial_propagate::PointLight;
-use crate::scene::bvh::{Ray, SceneBvh};
-use crate::scene::{Scene, Surface};
+use crate::scene::Scene;
+use crate::scene::bvh::{Ray, SceneBvh, SurfaceResponse};
 
 /// One texel of a reflective shadow map: the surface point the light reaches and what it reflects.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -55,20 +55,13 @@ pub struct RsmTexel {
     pub flux: Rgb,
 }
 
-/// Diffuse albedo of each mesh as voltab's path tracer sees it; `None` for refractive or index-matched
+/// Diffuse albedo of each mesh ([`SceneBvh::surface_response`], as voltab's path tracer reads it); `None` for refractive or index-matched
 /// surfaces (and meshes bounding a medium without a material), which reflect nothing diffusely.
 pub fn albedos(scene: &Scene, bvh: &SceneBvh) -> Vec<Option<Rgb>> {
-    scene
-        .meshes
-        .iter()
-        .enumerate()
-        .map(|(i, m)| {
-            let mat = m.material.and_then(|j| scene.materials.get(j));
-            match mat.map(|x| x.surface) {
-                Some(Surface::Dielectric { .. }) => None,
-                None if bvh.medium_bounded_by(i).is_some() => None,
-                _ => Some(mat.map_or([0.8; 3], |x| x.base_color).map(|a| if a.is_finite() { a.max(0.0) } else { 0.0 })),
-            }
+    (0..scene.meshes.len())
+        .map(|i| match bvh.surface_response(scene, i) {
+            SurfaceResponse::Lambert(k) => Some(k),
+            SurfaceResponse::PassThrough | SurfaceResponse::Dielectric(_) => None,
         })
         .collect()
 }

@@ -61,16 +61,8 @@ use super::flight::{self, Flight};
 use super::lights::{self, LightSample, PreparedLight};
 use crate::physics::hg;
 use crate::physics::rng::{Draws, SampleStream};
-use crate::scene::bvh::{Hit, MediumSegment, Ray, SceneBvh};
-use crate::scene::{Scene, Surface};
-
-/// How a mesh's surface treats light.
-#[derive(Debug, Clone, Copy)]
-enum SurfaceKind {
-    Lambert([f64; 3]),
-    PassThrough,
-    Dielectric(f64),
-}
+use crate::scene::Scene;
+use crate::scene::bvh::{Hit, MediumSegment, Ray, SceneBvh, SurfaceResponse as SurfaceKind};
 
 /// Everything a path needs about the scene, prepared once.
 pub struct Context<'a> {
@@ -211,22 +203,7 @@ impl<'a> Context<'a> {
                 emitters[m].push(i);
             }
         }
-        let kinds: Vec<SurfaceKind> = scene
-            .meshes
-            .iter()
-            .enumerate()
-            .map(|(i, m)| {
-                let mat = m.material.and_then(|j| scene.materials.get(j));
-                match mat.map(|x| x.surface) {
-                    Some(Surface::Dielectric { ior: 1.0 }) => SurfaceKind::PassThrough,
-                    Some(Surface::Dielectric { ior }) if ior.is_finite() && ior > 0.0 => SurfaceKind::Dielectric(ior),
-                    None if bvh.medium_bounded_by(i).is_some() => SurfaceKind::PassThrough,
-                    _ => SurfaceKind::Lambert(
-                        mat.map_or([0.8; 3], |x| x.base_color).map(|a| if a.is_finite() { a.max(0.0) } else { 0.0 }),
-                    ),
-                }
-            })
-            .collect();
+        let kinds: Vec<SurfaceKind> = (0..scene.meshes.len()).map(|i| bvh.surface_response(scene, i)).collect();
         let any_pass_through = kinds.iter().any(|k| matches!(k, SurfaceKind::PassThrough));
         let scale = scene.diagonal();
         let scale = if scale.is_finite() { scale } else { 0.0 };

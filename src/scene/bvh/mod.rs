@@ -36,7 +36,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::Scene;
+use super::{Scene, Surface};
 pub use media::{MediumSegment, effective_sigma, exponential_density_integral, optical_thickness};
 use traverse::{Accel, NodeRay};
 use triangle::{PreparedRay, Tri, intersect};
@@ -59,6 +59,19 @@ impl Ray {
     pub fn new(origin: [f64; 3], direction: [f64; 3]) -> Self {
         Ray { origin, direction, t_min: 0.0, t_max: f64::INFINITY }
     }
+}
+
+/// How light meets a surface ([`SceneBvh::surface_response`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SurfaceResponse {
+    /// Lambertian reflector with this albedo per channel: the material's base colour (non-finite or
+    /// negative values as 0), 0.8 grey without a material. Textures and roughness are not read.
+    Lambert([f64; 3]),
+    /// Index-matched boundary: light passes unbent (an `ior = 1` dielectric, or a mesh bounding a medium
+    /// without a material).
+    PassThrough,
+    /// Smooth dielectric interface with this index of refraction.
+    Dielectric(f64),
 }
 
 /// The closest intersection of a ray with the scene's triangles.
@@ -248,6 +261,20 @@ impl SceneBvh {
     /// boundary is [`Boundary::Mesh`](super::Boundary::Mesh) of it), as recorded at build time.
     pub fn medium_bounded_by(&self, mesh: usize) -> Option<usize> {
         self.bounds_medium.get(mesh).copied().flatten()
+    }
+
+    /// How light meets mesh `mesh`'s surface: the one reading of its material that every transport code
+    /// shares. `scene` must be the scene this BVH was built from.
+    pub fn surface_response(&self, scene: &Scene, mesh: usize) -> SurfaceResponse {
+        let mat = scene.meshes.get(mesh).and_then(|m| m.material).and_then(|j| scene.materials.get(j));
+        match mat.map(|x| x.surface) {
+            Some(Surface::Dielectric { ior: 1.0 }) => SurfaceResponse::PassThrough,
+            Some(Surface::Dielectric { ior }) if ior.is_finite() && ior > 0.0 => SurfaceResponse::Dielectric(ior),
+            None if self.medium_bounded_by(mesh).is_some() => SurfaceResponse::PassThrough,
+            _ => SurfaceResponse::Lambert(
+                mat.map_or([0.8; 3], |x| x.base_color).map(|a| if a.is_finite() { a.max(0.0) } else { 0.0 }),
+            ),
+        }
     }
 
     /// (mesh, triangle within mesh) of a global triangle id.
