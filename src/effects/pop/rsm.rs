@@ -55,8 +55,9 @@ pub struct RsmTexel {
     pub flux: Rgb,
 }
 
-/// Diffuse albedo of each mesh ([`SceneBvh::surface_response`], as voltab's path tracer reads it); `None` for refractive or index-matched
-/// surfaces (and meshes bounding a medium without a material), which reflect nothing diffusely.
+/// Diffuse albedo of each mesh ([`SceneBvh::surface_response`], as voltab's path tracer reads it);
+/// `None` for refractive or index-matched surfaces (and meshes bounding a medium without a material),
+/// which reflect nothing diffusely.
 pub fn albedos(scene: &Scene, bvh: &SceneBvh) -> Vec<Option<Rgb>> {
     (0..scene.meshes.len())
         .map(|i| match bvh.surface_response(scene, i) {
