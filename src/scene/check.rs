@@ -1,5 +1,5 @@
-//! Checks every imported scene gets, whatever its format: broken geometry and media are errors naming the
-//! node or prim; likely unit mistakes are warnings.
+//! Checks every imported scene gets, whatever its format: broken geometry, lights (the environment included)
+//! and media are errors naming the node or prim; likely unit mistakes are warnings.
 //!
 //! **Input → output.** A [`Scene`] fresh from an importer → the same scene with degenerate triangles of
 //! ordinary meshes dropped and warnings appended, or a [`SceneError`]. The rules are listed in
@@ -82,6 +82,19 @@ pub fn check(scene: &mut Scene) -> Result<(), SceneError> {
         };
         if vectors.iter().any(|v| !finite3(v)) {
             return Err(err(&l.name, "light position or direction is not finite".into(), "fix its transform"));
+        }
+    }
+    if let Some(env) = &scene.environment {
+        let m = env.multiplier();
+        if !(env.scale.is_finite() && env.scale >= 0.0 && finite3(&m) && env.color.iter().all(|&c| c >= 0.0)) {
+            return Err(err(
+                &env.name,
+                format!("environment scale {} × colour {:?} must be finite and >= 0", env.scale, env.color),
+                "light intensity, exposure-scaled, and colour must be finite and >= 0",
+            ));
+        }
+        if !env.rotation.iter().all(finite3) {
+            return Err(err(&env.name, "environment rotation is not finite".into(), "fix its transform"));
         }
     }
     for c in &scene.cameras {

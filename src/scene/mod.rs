@@ -17,7 +17,10 @@
 //! - directional: irradiance `E` \[W/m²\] on a surface facing the light (glTF lux / 683; UsdLux distant:
 //!   `L` × the solid angle of its `angle`, or `L` itself with `normalize`);
 //! - rectangle, disk, sphere and emissive meshes: emitted radiance `L` \[W/(m²·sr)\] (UsdLux nits / 683,
-//!   divided by the world-space area with `normalize`; glTF emissive × emissive strength read as nits).
+//!   divided by the world-space area with `normalize`; glTF emissive × emissive strength read as nits);
+//! - the environment ([`EnvironmentLight`], USD `DomeLight`): radiance `L(ω)` \[W/(m²·sr)\] arriving from
+//!   direction `ω`, the texture's value (1 without a texture) × `color` × `scale`, where `scale` is
+//!   UsdLux's `intensity · 2^exposure` nits / 683 like every other UsdLux light.
 //!
 //! **Media.** Coefficients `σ_s`, `σ_a` in 1/m and HG `g`, per channel, scaled by a [`Density`]
 //! (homogeneous, or iser2018's exponential height fog `ρ(x) = ρ'·e^{−b⟨x−o, n⟩}`). A medium fills a
@@ -69,8 +72,39 @@ pub struct Scene {
     pub cameras: Vec<Camera>,
     /// Participating media.
     pub media: Vec<Medium>,
+    /// The distant environment (USD `DomeLight`; glTF has none).
+    #[serde(default)]
+    pub environment: Option<EnvironmentLight>,
     /// What the importer or the checks noticed but could still import.
     pub warnings: Vec<SceneWarning>,
+}
+
+/// A distant environment lighting the scene from every direction (USD `DomeLight`, `DomeLight_1`): the
+/// radiance arriving from world direction `ω` is `texel(ω) · color · scale` \[W/(m²·sr)\] per channel,
+/// `texel` read from a latitude–longitude texture (OpenEXR's convention in the map's frame: row 0 toward
+/// the map's +Y, the centre column toward its +Z, a quarter across toward its +X; the same as
+/// `effects::pop::environment`), or 1 without a texture (a uniform environment).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnvironmentLight {
+    /// Prim path; every diagnostic uses it.
+    pub name: String,
+    /// Absolute path of the latitude–longitude texture (USD asset paths resolved against the layer that
+    /// authors them); `None`: a uniform environment.
+    pub texture: Option<PathBuf>,
+    /// Radiance per unit texel value \[W/(m²·sr)\]: `intensity · 2^exposure / 683`.
+    pub scale: f64,
+    /// Linear RGB tint (`inputs:color`).
+    pub color: Rgb,
+    /// World-from-map rotation (orthogonal; column-major: `rotation[j]` is the world direction of the
+    /// map's axis `j`), from the prim's world transform with scale and translation removed.
+    pub rotation: [[f64; 3]; 3],
+}
+
+impl EnvironmentLight {
+    /// `color · scale` per channel: the radiance of a uniform environment, or what multiplies each texel.
+    pub fn multiplier(&self) -> Rgb {
+        self.color.map(|c| c * self.scale)
+    }
 }
 
 /// A triangle mesh, transformed to world space.
@@ -378,6 +412,7 @@ impl Scene {
             lights: Vec::new(),
             cameras: Vec::new(),
             media: Vec::new(),
+            environment: None,
             warnings: Vec::new(),
         }
     }

@@ -1,14 +1,16 @@
 //! `voltab scene`: what an importer understood, as text for tech artists and JSON for tests.
 //!
 //! **Input → output.** A checked [`Scene`] → a [`SceneSummary`] (counts, bounds, every light with its
-//! converted value and unit, every medium with σ_s, σ_a, g and its boundary, cameras, materials,
-//! warnings) → text or JSON.
+//! converted value and unit, the environment (dome) with its texture, scale and rotation, every medium
+//! with σ_s, σ_a, g and its boundary, cameras, materials, warnings) → text or JSON.
 
 use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use super::{Boundary, Camera, Density, LightKind, Material, Scene, SceneFormat, SceneWarning, Surface};
+use super::{
+    Boundary, Camera, Density, EnvironmentLight, LightKind, Material, Scene, SceneFormat, SceneWarning, Surface,
+};
 
 /// Counts of what was imported.
 #[derive(Debug, Clone, Serialize)]
@@ -92,6 +94,8 @@ pub struct SceneSummary {
     pub meshes_without_lightmap_uv: Vec<String>,
     /// Lights.
     pub lights: Vec<LightSummary>,
+    /// The environment (USD `DomeLight`), radiance per texel value `scale × color` \[W/(m² sr)\].
+    pub environment: Option<EnvironmentLight>,
     /// Media.
     pub media: Vec<MediumSummary>,
     /// Cameras.
@@ -252,6 +256,7 @@ impl SceneSummary {
                 .map(|m| m.name.clone())
                 .collect(),
             lights,
+            environment: scene.environment.clone(),
             media,
             cameras: scene.cameras.clone(),
             materials: scene.materials.clone(),
@@ -295,6 +300,17 @@ impl SceneSummary {
                 let _ = write!(s, ", power [{:.4e}, {:.4e}, {:.4e}] W", p[0], p[1], p[2]);
             }
             let _ = writeln!(s);
+        }
+        if let Some(env) = &self.environment {
+            let m = env.multiplier();
+            let texture = env.texture.as_ref().map_or("none (uniform)".to_string(), |t| t.display().to_string());
+            let r = env.rotation;
+            let _ = writeln!(
+                s,
+                "environment {}: texture {texture}, radiance per texel value [{:.6e}, {:.6e}, {:.6e}] W/(m^2 sr), \
+                 map +Y (up) toward [{:.4}, {:.4}, {:.4}], +Z (centre) toward [{:.4}, {:.4}, {:.4}]",
+                env.name, m[0], m[1], m[2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2]
+            );
         }
         if !self.media.is_empty() {
             let _ = writeln!(s, "media (1/m):");

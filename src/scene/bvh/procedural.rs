@@ -39,6 +39,7 @@ pub fn scene(meshes: Vec<Mesh>) -> Scene {
         lights: Vec::new(),
         cameras: Vec::new(),
         media: Vec::new(),
+        environment: None,
         warnings: Vec::new(),
     }
 }
