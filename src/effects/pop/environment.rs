@@ -14,6 +14,13 @@
 //! `ΔΩ = (2π/W)(cos θ₀ − cos θ₁)`, so `Σ ΔΩ = 4π` to rounding. `ω` is the direction *toward* the
 //! environment (where light comes from).
 //!
+//! **Rotation.** A map may carry a world-from-map rotation ([`EnvMap::with_rotation`], e.g. a USD
+//! `DomeLight`'s transform): the convention above then holds in the map's own frame, and every
+//! direction ↔ texel function ([`EnvMap::texel_direction`], [`EnvMap::texel_of`], [`EnvMap::lookup`],
+//! [`EnvMap::texel_moment`], [`EnvSampler::sample`], the ordinates) maps through it. Nothing is
+//! resampled: the texels and their solid angles are unchanged, so the map's integral is exactly that of
+//! the unrotated map. Any orthogonal matrix is accepted (a mirroring one shows the map mirrored).
+//!
 //! **Ordinates (Sec. 5.1).** [`OrdinateSet::Importance`] places the `N` directions where the map is
 //! bright: the points `((i + ½)/m, frac(i/Φ))` of a two-dimensional Fibonacci lattice pushed through the
 //! inverse of the map's texel distribution ([`EnvSampler`], luminance × solid angle with a uniform
@@ -38,7 +45,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
 use super::grid::{Grid, Occluder, Rgb};
@@ -73,7 +80,12 @@ pub struct EnvMap {
     pub height: usize,
     /// Radiance per texel, row-major from the top-left.
     pub radiance: Vec<Rgb>,
+    /// World-from-map rotation (module doc); `None`: the map's frame is the world's.
+    rotation: Option<DMat3>,
 }
+
+/// Largest deviation of `RᵀR` from the identity accepted as a rotation by [`EnvMap::with_rotation`].
+const ORTHOGONALITY_TOLERANCE: f64 = 1e-9;
 
 impl EnvMap {
     /// A map from its texels. Errors: a side outside `1..=`[`MAX_SIDE`], a wrong length, a negative,
@@ -97,7 +109,63 @@ impl EnvMap {
                 radiance[i]
             ));
         }
-        Ok(Self { width, height, radiance })
+        Ok(Self { width, height, radiance, rotation: None })
+    }
+
+    /// A map of `width × height` texels all holding `radiance` (a uniform environment; any rotation
+    /// leaves it unchanged).
+    pub fn uniform(width: usize, height: usize, radiance: Rgb) -> Result<Self, String> {
+        // The sides are checked before the texels are allocated.
+        let n = if (1..=MAX_SIDE).contains(&width) && (1..=MAX_SIDE).contains(&height) { width * height } else { 0 };
+        Self::new(width, height, vec![radiance; n])
+    }
+
+    /// The map with every texel's radiance multiplied per channel by `tint` (finite, non-negative).
+    pub fn tinted(mut self, tint: Rgb) -> Result<Self, String> {
+        if tint.iter().any(|c| !c.is_finite() || *c < 0.0) {
+            return Err(format!("environment tint {tint:?} must be finite and non-negative"));
+        }
+        for v in &mut self.radiance {
+            for c in 0..3 {
+                v[c] *= tint[c];
+            }
+        }
+        let rotation = self.rotation;
+        Self::new(self.width, self.height, self.radiance).map(|m| Self { rotation, ..m })
+    }
+
+    /// The map placed in the world by `rotation` (world from map, column vectors; module doc), replacing
+    /// any earlier rotation. Errors: a matrix that is not finite or not orthogonal (`|RᵀR − I|` above
+    /// 1e-9). The identity is stored as no rotation, so an unrotated map behaves bit for bit as before.
+    pub fn with_rotation(mut self, rotation: DMat3) -> Result<Self, String> {
+        let cols = rotation.to_cols_array();
+        if cols.iter().any(|v| !v.is_finite()) {
+            return Err(format!("environment rotation {cols:?} is not finite"));
+        }
+        let gram = (rotation.transpose() * rotation - DMat3::IDENTITY).to_cols_array();
+        let off = gram.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if off > ORTHOGONALITY_TOLERANCE {
+            return Err(format!(
+                "environment rotation {cols:?} is not orthogonal (|RᵀR − I| = {off:.3e}); give a pure rotation"
+            ));
+        }
+        self.rotation = (rotation != DMat3::IDENTITY).then_some(rotation);
+        Ok(self)
+    }
+
+    /// The world-from-map rotation (the identity for an unrotated map).
+    pub fn rotation(&self) -> DMat3 {
+        self.rotation.unwrap_or(DMat3::IDENTITY)
+    }
+
+    /// A direction in the map's frame → world.
+    fn to_world(&self, d: DVec3) -> DVec3 {
+        self.rotation.map_or(d, |r| r * d)
+    }
+
+    /// A world direction → the map's frame (the transpose undoes an orthogonal matrix).
+    fn to_map(&self, w: DVec3) -> DVec3 {
+        self.rotation.map_or(w, |r| r.transpose() * w)
     }
 
     /// A map whose texels hold `f` at their centre directions.
@@ -124,7 +192,7 @@ impl EnvMap {
 
     /// Centre direction of texel `(col, row)`.
     pub fn texel_direction(&self, col: usize, row: usize) -> DVec3 {
-        direction(col as f64 + 0.5, row as f64 + 0.5, self.width, self.height)
+        self.to_world(direction(col as f64 + 0.5, row as f64 + 0.5, self.width, self.height))
     }
 
     /// Exact solid angle of a texel in `row` \[sr\].
@@ -144,11 +212,13 @@ impl EnvMap {
         let s2 = 0.5 * (t1 - t0) - 0.25 * ((2.0 * t1).sin() - (2.0 * t0).sin());
         let cs = 0.5 * (t1.sin().powi(2) - t0.sin().powi(2));
         let dphi = p1 - p0;
-        DVec3::new(s2 * (p0.cos() - p1.cos()), dphi * cs, -s2 * (p1.sin() - p0.sin()))
+        // A rotation is linear: the integral of the rotated directions is the rotated integral.
+        self.to_world(DVec3::new(s2 * (p0.cos() - p1.cos()), dphi * cs, -s2 * (p1.sin() - p0.sin())))
     }
 
-    /// The texel containing unit direction `w` (toward the environment).
+    /// The texel containing unit direction `w` (toward the environment, world frame).
     pub fn texel_of(&self, w: DVec3) -> (usize, usize) {
+        let w = self.to_map(w);
         let theta = w.y.clamp(-1.0, 1.0).acos();
         let mut phi = w.x.atan2(-w.z);
         if phi < 0.0 {
@@ -202,6 +272,8 @@ pub struct EnvSampler {
     p: Vec<f64>,
     width: usize,
     height: usize,
+    /// The map's world-from-map rotation.
+    rotation: Option<DMat3>,
 }
 
 impl EnvSampler {
@@ -242,7 +314,7 @@ impl EnvSampler {
         for v in &mut cdf {
             *v /= last;
         }
-        Self { cdf, p: p.iter().map(|v| v / last).collect(), width: w, height: h }
+        Self { cdf, p: p.iter().map(|v| v / last).collect(), width: w, height: h, rotation: env.rotation }
     }
 
     /// A direction for the uniform numbers `(u1, u2, u3)` in `[0, 1)` and its density per steradian.
@@ -258,7 +330,9 @@ impl EnvSampler {
         let phi = std::f64::consts::TAU * (col as f64 + u3) / self.width as f64;
         let (sp, cp) = phi.sin_cos();
         let omega = std::f64::consts::TAU / self.width as f64 * (c0 - c1);
-        (DVec3::new(st * sp, ct, -st * cp), self.p[t] / omega)
+        let d = DVec3::new(st * sp, ct, -st * cp);
+        // Rotations keep solid angles: the density per steradian is the map frame's.
+        (self.rotation.map_or(d, |r| r * d), self.p[t] / omega)
     }
 
     /// The texel index of lattice point `(u1, u2)` (for ordinate placement).
@@ -315,7 +389,7 @@ fn candidates(env: &EnvMap, n: usize, set: OrdinateSet, importance: Option<&EnvM
                     if out.len() < n && taken.insert(t) {
                         // The lattice's second coordinate places the point inside its texel.
                         let (col, row) = (t % env.width, t / env.width);
-                        out.push(direction(col as f64 + u2, row as f64 + 0.5, env.width, env.height));
+                        out.push(env.to_world(direction(col as f64 + u2, row as f64 + 0.5, env.width, env.height)));
                     }
                 }
                 m *= 2;
@@ -601,6 +675,29 @@ pub fn procedural_sky(w: DVec3, sun: Option<(DVec3, f64, Rgb)>) -> Rgb {
     } else {
         [0.10, 0.09, 0.08]
     }
+}
+
+/// Size of the map standing for a dome light without a texture (uniform radiance): enough texels for
+/// the importance-sampled ordinates to spread over the sphere (one ordinate per texel).
+pub const UNIFORM_DOME_SIZE: [usize; 2] = [64, 32];
+
+/// The environment map of a scene's dome light ([`crate::scene::EnvironmentLight`]): its
+/// latitude–longitude EXR texture × `scale` × `color`, or a uniform [`UNIFORM_DOME_SIZE`] map of
+/// `color · scale` without a texture, placed by the dome's rotation (the dome's frame uses this module's
+/// convention, so no re-mapping is needed). Errors: the texture's read error (naming the file), or an
+/// invalid scale, colour or rotation.
+pub fn dome_map(dome: &crate::scene::EnvironmentLight) -> Result<EnvMap, String> {
+    if !(dome.scale.is_finite() && dome.scale >= 0.0) {
+        return Err(format!("the dome's radiance scale {} must be finite and non-negative", dome.scale));
+    }
+    let map = match &dome.texture {
+        Some(path) => EnvMap::read_exr(path, dome.scale)?.tinted(dome.color)?,
+        None => {
+            let [w, h] = UNIFORM_DOME_SIZE;
+            EnvMap::uniform(w, h, dome.multiplier())?
+        }
+    };
+    map.with_rotation(DMat3::from_cols_array_2d(&dome.rotation))
 }
 
 /// The bundled sky map's size.

@@ -37,4 +37,6 @@ mod tests;
 #[cfg(test)]
 mod tests_env;
 #[cfg(test)]
+mod tests_env_rotation;
+#[cfg(test)]
 mod tests_radial;
