@@ -28,11 +28,15 @@ const HORIZONTAL_APERTURE: f64 = 20.955;
 const CLIPPING_RANGE: [f64; 2] = [1.0, 1e6];
 
 /// The radiance-like value of a UsdLux light: `intensity × 2^exposure × color / K`, with `normalize`.
-struct Emission {
+pub(super) struct Emission {
     /// `L` per channel, in W/(m² sr).
-    value: [f64; 3],
+    pub value: [f64; 3],
+    /// `intensity × 2^exposure / K` (W/(m² sr) per unit colour), finite and >= 0.
+    pub scale: f64,
+    /// `inputs:color`.
+    pub color: [f64; 3],
     /// `inputs:normalize`.
-    normalize: bool,
+    pub normalize: bool,
 }
 
 /// `x > 0` (false for NaN): a light with `normalize` needs a positive area.
@@ -66,7 +70,7 @@ impl Importer<'_> {
     }
 
     /// The LightAPI inputs common to every light.
-    fn emission(&mut self, prim: &sdf::Path) -> Result<Emission, SceneError> {
+    pub(super) fn emission(&mut self, prim: &sdf::Path) -> Result<Emission, SceneError> {
         let intensity = self.lux_f64(prim, "intensity", INTENSITY)?;
         let exposure = self.lux_f64(prim, "exposure", EXPOSURE)?;
         let color = self.first_of(prim, &["inputs:color", "color"], vec3, "a color3f")?.unwrap_or(COLOR);
@@ -82,7 +86,9 @@ impl Importer<'_> {
         }
         // nits → W/(m² sr): L = intensity · 2^exposure · color / K.
         let value = color.map(|c| intensity * exposure.exp2() * c / LUMENS_PER_WATT);
-        if value.iter().any(|v| !v.is_finite() || *v < 0.0) {
+        let scale = intensity * exposure.exp2() / LUMENS_PER_WATT;
+        let bad = |v: f64| !v.is_finite() || v < 0.0;
+        if value.iter().any(|&v| bad(v)) || bad(scale) || color.iter().any(|&c| bad(c)) {
             return Err(self.err(
                 prim,
                 format!(
@@ -92,11 +98,12 @@ impl Importer<'_> {
                 "light intensity, exposure-scaled, and colour must be finite and >= 0",
             ));
         }
-        Ok(Emission { value, normalize })
+        Ok(Emission { value, scale, color, normalize })
     }
 
-    /// Warns about light features voltab does not read (ShapingAPI, light filters, textures).
-    fn light_extras(&mut self, prim: &sdf::Path) -> Result<(), SceneError> {
+    /// Warns about light features voltab does not read (ShapingAPI, light filters, and textures unless
+    /// `reads_texture`: a DomeLight's texture is read).
+    pub(super) fn light_extras(&mut self, prim: &sdf::Path, reads_texture: bool) -> Result<(), SceneError> {
         let p = self.stage.prim(prim.clone());
         let apis = p.api_schemas().map_err(|e| self.usd_err(prim, "apiSchemas", e))?;
         if apis.iter().any(|a| a.as_str() == "ShapingAPI") {
@@ -115,7 +122,7 @@ impl Importer<'_> {
                 "remove light:filters or bake their effect into the light",
             );
         }
-        if self.value(prim, "inputs:texture:file")?.is_some() {
+        if !reads_texture && self.value(prim, "inputs:texture:file")?.is_some() {
             self.warn(
                 prim.as_str(),
                 "light textures (inputs:texture:file) are not read; the light emits its uniform colour".into(),
@@ -142,7 +149,7 @@ impl Importer<'_> {
     /// Converts a SphereLight, RectLight, DiskLight or DistantLight (`ty`) with world matrix `m`.
     pub(super) fn read_light(&mut self, prim: &sdf::Path, ty: &str, m: &DMat4) -> Result<(), SceneError> {
         let em = self.emission(prim)?;
-        self.light_extras(prim)?;
+        self.light_extras(prim, false)?;
         let center = m.transform_point3(DVec3::ZERO).to_array();
         // Emitting side: local −Z; plane normals go through the inverse transpose.
         let local_n = DVec3::NEG_Z;

@@ -22,6 +22,11 @@
 //! - UsdLux `SphereLight` (`treatAsPoint` → point light), `RectLight`, `DiskLight`, `DistantLight`,
 //!   with USD's fallbacks hard-coded (openusd has none) and `normalize`; the pre-2021 un-prefixed
 //!   input names are accepted too.
+//! - UsdLux `DomeLight` and `DomeLight_1` (`poleAxis`) → [`Scene::environment`](super::Scene): a
+//!   latitude–longitude texture (`inputs:texture:format` `latlong` or `automatic`; the asset path
+//!   resolved against the layer that authors it) or none (uniform), `intensity · 2^exposure · color / 683`
+//!   per texel value, and the prim's rotation (scale and translation do not matter for a dome). The
+//!   first dome wins; `dome.rs` derives the orientation.
 //! - `UsdGeomCamera` (perspective and orthographic).
 //! - UsdShade: `material:binding` (direct, on the prim or inherited, `strongerThanDescendants`,
 //!   `material:binding:full` before all-purpose), `UsdPreviewSurface` (diffuseColor, emissiveColor →
@@ -37,13 +42,17 @@
 //! time-sampled attributes (the first sample is read, else the default); subdivision surfaces
 //! (`subdivisionScheme` other than `"none"`, including USD's unauthored catmullClark: the control cage
 //! is read); SkelRoot meshes (rest pose); textures and shading nodes driving inputs; colour
-//! temperature; non-uniformly scaled sphere and disk lights.
+//! temperature; non-uniformly scaled sphere and disk lights; dome lights with non-uniform scale, shear or
+//! a mirroring transform (their nearest orthogonal matrix), `normalize` or portals (ignored), and dome
+//! textures that do not resolve to a file (kept; stages lit by the dome fail naming it).
 //!
 //! **Skipped with a warning naming the prim.** `PointInstancer` (and its subtree), `Skeleton`,
-//! `SkelAnimation`, `BlendShape`, `DomeLight`, `CylinderLight`, `GeometryLight`, `PortalLight`,
-//! plugin lights and light filters, `ShapingAPI` (spot cones), gprims other than `Mesh` (`Sphere`,
-//! `Cube`, `Cylinder`, `Cone`, `Capsule`, `Plane`, `Points`, curves, patches, `TetMesh`), `Volume`
-//! fields, per-face `GeomSubset` material bindings and collection bindings.
+//! `SkelAnimation`, `BlendShape`, `CylinderLight`, `GeometryLight`, `PortalLight`, plugin lights and
+//! light filters, dome lights after the first, dome lights whose texture format is not latlong
+//! (`mirroredBall`, `angular`, `cubeMapVerticalCross`), whose texture is packaged inside a `.usdz` or
+//! whose transform is singular, `ShapingAPI` (spot cones), gprims other than `Mesh` (`Sphere`, `Cube`,
+//! `Cylinder`, `Cone`, `Capsule`, `Plane`, `Points`, curves, patches, `TetMesh`), `Volume` fields,
+//! per-face `GeomSubset` material bindings and collection bindings.
 //!
 //! **Skipped silently (intended by the author).** Inactive prims, `class` and `over`-only prims,
 //! prims with `visibility = "invisible"` and their subtrees, and `purpose` `guide` or `proxy`
@@ -60,6 +69,7 @@
 //! openusd's `Stage` is not `Send`; everything is converted on the calling thread into voltab's
 //! own structs.
 
+mod dome;
 mod lights;
 mod mesh;
 mod shade;
@@ -155,8 +165,7 @@ const OTHER_GPRIMS: [&str; 14] = [
 ];
 
 /// Lights voltab has no model for (skipped with a warning).
-const OTHER_LIGHTS: [&str; 6] =
-    ["DomeLight", "DomeLight_1", "CylinderLight", "GeometryLight", "PortalLight", "PluginLight"];
+const OTHER_LIGHTS: [&str; 4] = ["CylinderLight", "GeometryLight", "PortalLight", "PluginLight"];
 
 fn import_stage(path: &Path) -> Result<Scene, SceneError> {
     if !path.is_file() {
@@ -255,10 +264,11 @@ impl Importer<'_> {
             "Mesh" => self.add_mesh(path, m)?,
             "Camera" => self.read_camera(path, m)?,
             "SphereLight" | "RectLight" | "DiskLight" | "DistantLight" => self.read_light(path, ty, m)?,
+            "DomeLight" | "DomeLight_1" => self.read_dome(path, ty, m)?,
             _ if OTHER_LIGHTS.contains(&ty) => self.warn(
                 loc,
                 format!("{ty} is not supported; the light is skipped"),
-                "voltab reads SphereLight, RectLight, DiskLight and DistantLight (and emissive meshes)",
+                "voltab reads SphereLight, RectLight, DiskLight, DistantLight and DomeLight (and emissive meshes)",
             ),
             "LightFilter" | "PluginLightFilter" => {
                 self.warn(loc, format!("{ty} is not supported; it is ignored"), "bake the filter into the light")

@@ -2,6 +2,7 @@
 //! them all with usd-core, whose parser is stricter than openusd's); expected values are computed by
 //! hand in each test from the formulas in `docs/design/scene.md`.
 
+mod dome;
 mod errors;
 mod geometry;
 mod interchange;
@@ -46,6 +47,16 @@ pub(super) const SNIPPETS: &[(&str, &str)] = &[
     ("nan_point", errors::NAN_POINT),
     ("negative_light", errors::NEGATIVE_LIGHT),
     ("two_globals", errors::TWO_GLOBALS),
+    ("dome_textured", dome::DOME_TEXTURED),
+    ("dome_uniform", dome::DOME_UNIFORM),
+    ("dome_1_z_up", dome::DOME_1_Z_UP),
+    ("dome_z_up", dome::DOME_Z_UP),
+    ("dome_pole_z", dome::DOME_POLE_Z),
+    ("dome_formats", dome::DOME_FORMATS),
+    ("two_domes", dome::TWO_DOMES),
+    ("dome_extras", dome::DOME_EXTRAS),
+    ("dome_degenerate", dome::DOME_DEGENERATE),
+    ("dome_oriented", dome::DOME_ORIENTED),
 ];
 
 /// A snippet written to a temporary folder (kept alive with the path).
