@@ -530,19 +530,25 @@ fn plan_ms_lobes(t: &ValidatedTable, d: &MsLobes, needs: &Needs) -> TablePlan {
 /// A screen-space effect stage renders its own scene: it runs when that scene is among the planned
 /// scenes and has what the effect needs (`lacks` names what is missing).
 /// What a scene lacks for POP (`PopRender` and its `PopPreset` table): a global medium that scatters
-/// forward (`g ≥ 0`), or a directional, point, spot or sphere light (rectilinear and radial grids).
+/// forward (`g ≥ 0`), or a directional, point, spot or sphere light (rectilinear and radial grids) or a
+/// dome light (environment ordinates).
 fn pop_lacks(sc: &Scene) -> Option<&'static str> {
     use crate::scene::LightKind;
     let media = sc.media.iter().filter(|m| m.boundary == crate::scene::Boundary::Global).collect::<Vec<_>>();
     if media.len() != 1 || media[0].g.iter().any(|g| *g < 0.0) {
         Some("single forward-scattering global medium")
-    } else if !sc.lights.iter().any(|l| {
-        matches!(
-            l.kind,
-            LightKind::Directional { .. } | LightKind::Point { .. } | LightKind::Spot { .. } | LightKind::Sphere { .. }
-        )
-    }) {
-        Some("directional, point, spot or sphere light")
+    } else if sc.environment.is_none()
+        && !sc.lights.iter().any(|l| {
+            matches!(
+                l.kind,
+                LightKind::Directional { .. }
+                    | LightKind::Point { .. }
+                    | LightKind::Spot { .. }
+                    | LightKind::Sphere { .. }
+            )
+        })
+    {
+        Some("directional, point, spot, sphere or dome light")
     } else {
         None
     }
@@ -642,7 +648,7 @@ impl Plan {
                     ),
                     None => skipped(
                         t,
-                        "no scene has a global medium lit by a directional, point, spot or sphere light (what POP propagates)"
+                        "no scene has a global medium lit by a directional, point, spot, sphere or dome light (what POP propagates)"
                             .into(),
                     ),
                 },

@@ -306,3 +306,20 @@ fn effect_stages_follow_their_scenes() {
         (Decision::Skip, "its scene ../scenes/outdoor.gltf is not among the planned scenes".to_string())
     );
 }
+
+#[test]
+fn a_dome_alone_lights_a_scene_for_pop() {
+    // The fog room without its bulb has only an emissive panel: nothing POP propagates on a grid of its
+    // own; a dome light (environment ordinates) is enough.
+    let mut s = fog_room();
+    s.lights.retain(|l| matches!(l.kind, crate::scene::LightKind::EmissiveMesh { .. }));
+    assert_eq!(pop_lacks(&s), Some("directional, point, spot, sphere or dome light"));
+    s.environment = Some(crate::scene::EnvironmentLight {
+        name: "/Sky".into(),
+        texture: None,
+        scale: 1.0 / crate::scene::LUMENS_PER_WATT,
+        color: [1.0; 3],
+        rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    });
+    assert_eq!(pop_lacks(&s), None);
+}

@@ -7,9 +7,13 @@
 //!
 //! **Input.** A scene file (relative to the pipeline file) with a perspective camera, one global
 //! medium (homogeneous or exponential height fog; optionally multiplied by a raw `f32` or EXR-slice
-//! density volume spanning the scene's bounds), its lights and optionally a latitude–longitude EXR
-//! environment map; the id of a compiled `PopPreset` table (grid, iterations, ε_L, ε_a, residuum
-//! switch, flow table). **Phases** (elek2014 Fig. 14 names, in
+//! density volume spanning the scene's bounds), its lights and optionally an environment: the stage's
+//! latitude–longitude EXR `environment` map or, when that field is empty, the scene's USD `DomeLight`
+//! (its texture × intensity, rotated as the dome is; a uniform map without a texture; see
+//! [`environment::dome_map`]). When both are present the stage's map wins and `skipped` in
+//! `summary.json` says the dome was overridden; an unreadable dome texture is an error naming the USD
+//! file, the prim and the texture. The id of a compiled `PopPreset` table (grid, iterations, ε_L, ε_a,
+//! residuum switch, flow table). **Phases** (elek2014 Fig. 14 names, in
 //! `summary.json`): import → BVH → G-buffer → voxelisation → (environment: ordinates, Sec. 5.1) → per
 //! directional light or ordinate: grid and medium downsampling, initialisation (Sec. 4.1), propagation
 //! (Eqs. 2–8), isotropic residuum (Sec. 5.4, merged across the ordinates) → merge (Sec. 5.3) →
@@ -40,8 +44,8 @@ use crate::effects::pop::radial_propagate;
 use crate::effects::pop::render::{self, MarchOptions};
 use crate::effects::pop::scene::{self as pop_scene, BvhOccluder, Environment, RawDensity, SceneMedia};
 use crate::effects::{Image, RgbImage, ViewCamera};
-use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
+use crate::scene::{EnvironmentLight, Scene};
 use crate::tables::FieldIssue;
 use crate::tables::pop_preset::PopPresetTable;
 
@@ -85,9 +89,10 @@ crate::declare_params! {
         rsm_size: u32 = 64, unit = "texels", range = "1 to 1024";
         /// Latitude-longitude HDR environment map (EXR with R, G, B; row 0 up, centre column toward +Z)
         /// lighting the medium through principal ordinates (elek2014 Sec. 5), relative to the pipeline
-        /// file; empty: none.
+        /// file; it overrides the scene's DomeLight (noted in the summary's `skipped`). Empty: the scene's
+        /// DomeLight if it has one (texture × its intensity, rotated with the dome), else none.
         environment: String = String::new(), unit = "", range = "empty or path to an .exr file";
-        /// Multiplier of the environment map's radiance.
+        /// Multiplier of the environment map's radiance (not of a DomeLight's, which has its own intensity).
         environment_intensity: f64 = 1.0, unit = "", range = "0 to 1e6";
         /// Principal ordinates of the environment at most (0: the preset's `ordinates`).
         environment_ordinates: u32 = 0, unit = "directions", range = "0 to 4096";
@@ -212,7 +217,7 @@ pub struct PopSummary {
     pub fig12: Vec<Fig12Row>,
     /// POP's scattered light against path tracing of the same view (`reference_samples > 0`).
     pub reference: Option<ReferenceComparison>,
-    /// The environment lighting (when `environment` is given).
+    /// The environment lighting (the `environment` map, or the scene's DomeLight).
     pub environment: Option<EnvSummary>,
     /// The VPLs of the surfaces' reflected light (when `surface_vpls > 0`): maps, VPLs, flux, time.
     pub reflection: Option<pop_scene::Reflection>,
@@ -255,7 +260,7 @@ pub struct PopFrame {
 /// The environment lighting of a frame (elek2014 Sec. 5).
 #[derive(Debug, Clone, Serialize)]
 pub struct EnvSummary {
-    /// Map file.
+    /// Map file (the stage's `environment`), or `DomeLight <prim> (<texture>)`.
     pub map: String,
     /// Map size.
     pub size: [usize; 2],
@@ -604,6 +609,26 @@ fn render_environment(
     Ok((PointFrame { frame, march_ms: ms(t0) }, summary))
 }
 
+/// The environment map of the scene's dome light ([`environment::dome_map`]); a texture that cannot be
+/// read is an input error naming the scene file, the prim and the texture, with the fix.
+fn dome_environment(id: &str, scene: &Scene, dome: &EnvironmentLight) -> Result<EnvMap, StageError> {
+    environment::dome_map(dome).map_err(|e| {
+        let texture = dome.texture.as_ref().map_or("(none)".to_string(), |t| t.display().to_string());
+        StageError::Input {
+            stage: id.into(),
+            message: format!(
+                "{}: DomeLight {}: cannot light the medium with its texture {texture}: {e}",
+                scene.source.display(),
+                dome.name
+            ),
+            help: "fix the DomeLight's inputs:texture:file: it must name a latitude-longitude RGB OpenEXR file \
+                   (convert others, e.g. `oiiotool sky.hdr -o sky.exr`), and a relative asset path is relative to \
+                   the layer that authors it; or give the stage's environment field, which overrides the dome"
+                .into(),
+        }
+    })
+}
+
 /// `colour · transmittance (+ scattered)`.
 pub fn compose(colour: &RgbImage, frame: &PopFrame, with_scattered: bool) -> RgbImage {
     let data = colour
@@ -731,26 +756,37 @@ impl PopRender {
                 .map_err(fail)?;
             Some(RawDensity { dims, values })
         };
-        let environment = if self.environment.is_empty() {
-            None
-        } else {
+        let ordinates = self.environment_ordinates as usize;
+        let set = self.ordinate_set().unwrap_or(OrdinateSet::Importance);
+        let mut overridden = None;
+        let environment = if !self.environment.is_empty() {
             let path = ctx.base_dir.join(&self.environment);
             let map = EnvMap::read_exr(&path, self.environment_intensity).map_err(|message| StageError::Input {
                 stage: id.into(),
                 message,
                 help: "give environment a latitude-longitude RGB EXR map, relative to the pipeline file".into(),
             })?;
-            Some(Environment {
-                map,
-                name: self.environment.clone(),
-                ordinates: self.environment_ordinates as usize,
-                set: self.ordinate_set().unwrap_or(OrdinateSet::Importance),
-            })
+            // The stage's map wins over the scene's dome, and says so in `skipped`.
+            overridden = scene.environment.as_ref().map(|dome| {
+                format!(
+                    "DomeLight {}: overridden by the stage's environment map {} (leave environment empty to light \
+                     with the dome)",
+                    dome.name, self.environment
+                )
+            });
+            Some(Environment { map, name: self.environment.clone(), ordinates, set })
+        } else if let Some(dome) = &scene.environment {
+            let map = dome_environment(id, scene, dome)?;
+            let what = dome.texture.as_ref().map_or("uniform".to_string(), |t| t.display().to_string());
+            Some(Environment { map, name: format!("DomeLight {} ({what})", dome.name), ordinates, set })
+        } else {
+            None
         };
         let mut media =
             pop_scene::scene_media(scene, self.voxels as usize, raw.as_ref(), environment, self.vpls as usize)
                 .map_err(fail)?;
         pop_scene::add_reflection_vpls(&mut media, scene, bvh, self.surface_vpls as usize, self.rsm_size as usize);
+        media.skipped.extend(overridden);
         Ok(media)
     }
 
