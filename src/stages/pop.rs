@@ -480,19 +480,19 @@ fn render_points(
     }
     let t0 = Instant::now();
     let merged = Grid::medium_aligned(&media.medium, merge_dims(table))?;
-    // The VPLs of reflected light (the last points) bring their uncollided light through the grid too.
-    let reflected = media.points.len() - media.reflection.as_ref().map_or(0, |r| r.vpls);
+    // The VPLs of reflected light bring their uncollided light through the grid too.
+    let reflected = media.first_reflection_vpl();
     let fields: Vec<std::borrow::Cow<'_, [[f64; 3]]>> = grids
         .iter()
         .enumerate()
-        .map(|(i, (g, p))| match i >= reflected {
-            true => {
-                let direct = radial_propagate::uncollided_toward_eye(g, p, cam.position);
-                std::borrow::Cow::Owned(
-                    p.toward_eye.iter().zip(direct).map(|(a, b)| [0, 1, 2].map(|c| a[c] + b[c])).collect(),
-                )
+        .map(|(i, (g, p))| {
+            if i < reflected {
+                return std::borrow::Cow::Borrowed(p.toward_eye.as_slice());
             }
-            false => std::borrow::Cow::Borrowed(p.toward_eye.as_slice()),
+            let direct = radial_propagate::uncollided_toward_eye(g, p, cam.position);
+            std::borrow::Cow::Owned(
+                p.toward_eye.iter().zip(direct).map(|(a, b)| [0, 1, 2].map(|c| a[c] + b[c])).collect(),
+            )
         })
         .collect();
     let sources: Vec<(&RadialGrid, &[[f64; 3]])> =
@@ -807,7 +807,8 @@ impl PopRender {
         let v = fields.load(id, ctx, None)?;
         let t0 = Instant::now();
         let media = self.media(id, ctx, &v.scene, &v.bvh)?;
-        let voxel_ms = ms(t0);
+        // The reflective shadow maps are timed on their own (`reflection` in the summary).
+        let voxel_ms = ms(t0) - media.reflection.as_ref().map_or(0.0, |r| r.ms);
         let g = &v.gbuffer;
         let distance: Vec<f64> = g.distance.data.iter().map(|&d| f64::from(d)).collect();
         let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };

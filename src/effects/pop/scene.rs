@@ -61,6 +61,14 @@ pub struct SceneMedia {
     pub reflection: Option<Reflection>,
 }
 
+impl SceneMedia {
+    /// Index in [`SceneMedia::points`] of the first VPL of reflected light ([`add_reflection_vpls`]
+    /// appends them last); `points.len()` when there are none.
+    pub fn first_reflection_vpl(&self) -> usize {
+        self.points.len() - self.reflection.as_ref().map_or(0, |r| r.vpls)
+    }
+}
+
 /// What [`add_reflection_vpls`] added.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Reflection {
