@@ -113,6 +113,13 @@ pub struct VolumeSample {
     pub bounce: u8,
     /// Path length \[m\] inside the object from the entry point to `start`.
     pub depth: f64,
+    /// The boundary point the light last crossed or was reflected at (the plane of its image beam).
+    pub plane_point: DVec3,
+    /// Unit outward normal there.
+    pub plane_normal: DVec3,
+    /// For an interval starting on the boundary, `tan θ` of the angle between the light and the
+    /// inward normal (0 otherwise): its box reaches back across the boundary (see [`Self::obb`]).
+    pub tan_entry: f64,
 }
 
 impl VolumeSample {
@@ -135,13 +142,18 @@ impl VolumeSample {
         })
     }
 
-    /// Oriented box around the interval: first axis the direction with half-length `L/2` about the
-    /// centre, a square cross-section of side `widen·sqrt(area)` in a deterministic frame.
+    /// Oriented box around the interval: first axis the direction, a square cross-section of side
+    /// `widen·sqrt(area)` in a deterministic frame, axially the interval `[0, L]`. An interval that
+    /// starts on the boundary with the light at angle θ to the normal has its start face tilted
+    /// against the boundary, so a wedge of the medium up to `w tan θ` (half-width `w`) behind the face
+    /// would be covered by fewer boxes than elsewhere and lose single scattering; such a box reaches
+    /// back `w tan θ` (at most `4w`) to cover it.
     pub fn obb(&self, widen: f64) -> Obb {
         let a = self.direction.try_normalize().unwrap_or(DVec3::X);
         let (u, v) = a.any_orthonormal_pair();
         let w = 0.5 * widen * self.area.max(0.0).sqrt();
-        Obb { center: self.center(), axes: [a, u, v], half: [0.5 * self.length, w, w] }
+        let back = if self.tan_entry > 0.0 { (w * self.tan_entry).min(4.0 * w) } else { 0.0 };
+        Obb { center: self.center() - 0.5 * back * a, axes: [a, u, v], half: [0.5 * (self.length + back), w, w] }
     }
 }
 
@@ -549,6 +561,7 @@ fn trace(ctx: &LightCtx, ray: &Entering, out: &mut Vec<VolumeSample>) -> RayBudg
     let entering = max3(ray.flux);
     let mut depth = 0.0;
     let mut bounce: u32 = 0;
+    let mut plane = (ray.point, ray.normal);
     loop {
         let remaining = ctx.budget - depth;
         let hit = bvh.closest_hit(&Ray::new(origin.to_array(), dir.to_array()));
@@ -559,7 +572,7 @@ fn trace(ctx: &LightCtx, ray: &Entering, out: &mut Vec<VolumeSample>) -> RayBudg
             None => (f64::INFINITY, None),
         };
         let s = t_exit.min(remaining).max(0.0);
-        place_intervals(ctx, ray, &Segment { origin, dir, flux, s, depth, bounce }, out);
+        place_intervals(ctx, ray, &Segment { origin, dir, flux, s, depth, bounce, plane }, out);
         let at_s: [f64; 3] = std::array::from_fn(|c| flux[c] * (-ctx.sigma_t[c] * s).exp());
         let Some(h) = facet.filter(|_| t_exit <= remaining) else {
             (0..3).for_each(|c| res.lost[c] += at_s[c]);
@@ -580,6 +593,7 @@ fn trace(ctx: &LightCtx, ray: &Entering, out: &mut Vec<VolumeSample>) -> RayBudg
         let exit = origin + dir * t_exit;
         dir = reflect(dir, n).normalize();
         origin = exit - n * ctx.eps;
+        plane = (exit, n);
         flux = reflected;
         bounce += 1;
     }
@@ -595,12 +609,14 @@ struct Segment {
     s: f64,
     depth: f64,
     bounce: u32,
+    /// Boundary point the segment starts from and its unit outward normal.
+    plane: (DVec3, DVec3),
 }
 
 /// Intervals of wang2018 Eq. 10 over `[0, s]` of one straight segment:
 /// `t_k = −ln(1 − k(1 − e^{−σ s})/n)/σ` with `σ` the smallest `σ_t`.
 fn place_intervals(ctx: &LightCtx, ray: &Entering, seg: &Segment, out: &mut Vec<VolumeSample>) {
-    let Segment { origin, dir, flux, s, depth, bounce } = *seg;
+    let Segment { origin, dir, flux, s, depth, bounce, plane } = *seg;
     if !(s > 0.0 && s.is_finite()) {
         return;
     }
@@ -620,10 +636,20 @@ fn place_intervals(ctx: &LightCtx, ray: &Entering, seg: &Segment, out: &mut Vec<
                 surface: ray.surface,
                 bounce: bounce.min(255) as u8,
                 depth: depth + prev,
+                plane_point: plane.0,
+                plane_normal: plane.1,
+                tan_entry: if prev == 0.0 { tan_to(dir, plane.1) } else { 0.0 },
             });
         }
         prev = t;
     }
+}
+
+/// `tan θ` of the angle between unit `dir` and the line of unit normal `n` (0 for a degenerate input).
+fn tan_to(dir: DVec3, n: DVec3) -> f64 {
+    let c = dir.dot(n).abs().min(1.0);
+    let t = (1.0 - c * c).sqrt() / c;
+    if t.is_finite() { t } else { 0.0 }
 }
 
 /// Per surface sample: direct irradiance, volume samples and flux accounting.
@@ -1156,6 +1182,9 @@ mod tests {
             surface: 0,
             bounce: 0,
             depth: 0.0,
+            plane_point: DVec3::new(1.0, 0.0, 0.0),
+            plane_normal: -DVec3::Z,
+            tan_entry: 0.0,
         };
         assert_eq!(v.center(), DVec3::new(1.0, 0.0, 1.0));
         assert_eq!(v.end(), DVec3::new(1.0, 0.0, 2.0));
@@ -1175,6 +1204,12 @@ mod tests {
         let (lo, hi) = b.aabb();
         assert!((lo.z - 0.0).abs() < 1e-12 && (hi.z - 2.0).abs() < 1e-12);
         assert!(lo.x <= 0.9 + 1e-12 && hi.x >= 1.1 - 1e-12 && hi.x - lo.x <= 0.2 * 2f64.sqrt() + 1e-12);
+        // Starting on the boundary at tan θ = 0.5, half-width 0.1: the box reaches back 0.05; at
+        // grazing tan θ = 100 the reach stops at 4 half-widths (0.4). The end face stays put.
+        for (tan_entry, back) in [(0.5, 0.05), (100.0, 0.4)] {
+            let (t0, t1) = VolumeSample { tan_entry, ..v }.obb(1.0).hit(DVec3::new(1.0, 0.0, -1.0), DVec3::Z).unwrap();
+            assert!((t0 - (1.0 - back)).abs() < 1e-12 && (t1 - 3.0).abs() < 1e-12, "{tan_entry}: {t0} {t1}");
+        }
     }
 
     #[test]
