@@ -62,7 +62,9 @@ fn main() {
             "clamp" => ropts.clamp_mfp = v.parse().unwrap(),
             "surf" => popts.surface_samples = v.parse().unwrap(),
             "terms" => ropts.reflection_terms = v.parse().unwrap(),
-            "ior" | "black" => {}
+            "image" => ropts.boundary_image = v == "1",
+            "stride" => ropts.smooth_stride = v.parse().unwrap(),
+            "ior" | "black" | "dump" => {}
             _ => panic!("unknown {k}"),
         }
     }
@@ -131,14 +133,16 @@ fn main() {
     let rt0 = total(&refs[0].0);
     let rt1 = total(&refs[1].0);
     println!(
-        "{name} spp {spp}x2 scale {scale:.4e} | point {ms:.0} ms (pre {:.0}, single {:.0}, dm {:.0}, bounced {:.0}, rest {:.0}) cut {:.0} terms {}",
+        "{name} spp {spp}x2 scale {scale:.4e} | point {ms:.0} ms (pre {:.0}, single {:.0}, dm {:.0}, bounced {:.0}, rest {:.0}) cut {:.0} terms {} interp {}/{}",
         prep.preprocess_ms,
         frame.times.single_ms,
         frame.times.double_multiple_ms,
         frame.times.bounced_ms,
         frame.times.rest_ms,
         frame.stats.mean_cut,
-        prep.reflection_terms
+        prep.reflection_terms,
+        frame.stats.interpolated,
+        frame.stats.segments
     );
     let rows: [(&str, &Img, usize); 4] =
         [("rest", &frame.rest, 0), ("single", &frame.single, 1), ("double", &frame.double, 2), ("mult+bnc", &mb, 3)];
@@ -170,6 +174,12 @@ fn main() {
     for k in 0..4 {
         let (a, b) = (sums(&refs[0].0[k]), sums(&refs[1].0[k]));
         println!("  ref comp {k} seed sums {:.2} {:.2} {:.2} / {:.2} {:.2} {:.2}", a[0], a[1], a[2], b[0], b[1], b[2]);
+    }
+    // Images for inspection: point-based and reference totals, normalised, as JSON (`dump=PATH`).
+    if let Some(path) = args[3..].iter().find_map(|kv| kv.strip_prefix("dump=")) {
+        let v = serde_json::json!({ "w": w, "scale": scale, "point": pt, "reference": ref_total, "mask": mask,
+            "components": [&frame.rest, &frame.single, &frame.double, &mb], "ref_components": &avg });
+        std::fs::write(path, serde_json::to_vec(&v).unwrap()).unwrap();
     }
     // Multiple alone against ≥3 with bounced separately listed.
     let (sm, sb) = (sums(&frame.multiple), sums(&frame.bounced));

@@ -90,6 +90,13 @@ crate::declare_params! {
         clamp_mfp: f64 = 0.0625, unit = "mean free paths", range = "0 to 100";
         /// Two-step traversal with 2×2 sharing for single scattering (Sec. 4.3).
         two_step: bool = true, unit = "", range = "true or false";
+        /// Half-space image beams for the table's infinite-medium responses (light that leaves near where it
+        /// entered is not scattered back).
+        boundary_image: bool = true, unit = "", range = "true or false";
+        /// Most terms of the series of internal reflections of diffuse light (1: wang2018's single reflection).
+        reflection_terms: u32 = 200, unit = "terms", range = "1 to 200";
+        /// Multiple and bounced scattering at every n-th pixel and row, interpolated between (Sec. 5.1: 4).
+        smooth_stride: u32 = 4, unit = "px", range = "1 to 64";
         /// Paths per pixel of the path-traced reference (0: no comparison).
         reference_samples: u32 = 0, unit = "paths", range = "0 to 1000000";
         /// Width of the comparison images (the height keeps the aspect ratio).
@@ -201,6 +208,8 @@ impl TranslucentRender {
             ("diffuse_samples", self.diffuse_samples, 1, 4096),
             ("reference_samples", self.reference_samples, 0, 1_000_000),
             ("reference_width", self.reference_width, 4, 4096),
+            ("reflection_terms", self.reflection_terms, 1, 200),
+            ("smooth_stride", self.smooth_stride, 1, 64),
         ] {
             if !(lo..=hi).contains(&x) {
                 v.push(FieldIssue { field, message: format!("{field} = {x}"), help: format!("use {lo} to {hi}") });
@@ -234,6 +243,9 @@ impl TranslucentRender {
             widen: self.widen,
             clamp_mfp: self.clamp_mfp,
             two_step: self.two_step,
+            boundary_image: self.boundary_image,
+            reflection_terms: self.reflection_terms as usize,
+            smooth_stride: self.smooth_stride as usize,
             ..RenderOptions::default()
         }
     }

@@ -11,6 +11,8 @@
 //! - [`octree`] (Sec. 3.4, 4.2, 4.3): the spatial hierarchy over volume and surface samples, its
 //!   ray traversal (single scattering), its tree cuts (Algorithm 1) and the two-step traversal.
 //! - [`render`] (Sec. 3.5, 5.1): camera rays, sample depths (Eq. 10) and the components (Eq. 5–9).
+//! - [`lowres`] (Sec. 5.1): which segments' smooth components are interpolated from a downsampled
+//!   grid of anchor pixels.
 //! - [`surface_light`] (Sec. 3.5.5): the diffuse light the boundary sends into the object, with every
 //!   internal reflection.
 //! - [`compare`]: MSE against the reference (normalisation stated there), error against run time.
@@ -28,6 +30,7 @@
 //! `(1 − F)/η²`, the inverse of how a camera path's importance enters.
 
 pub mod compare;
+pub mod lowres;
 pub mod octree;
 pub mod points;
 pub mod reference;
@@ -196,6 +199,9 @@ pub fn find_object(scene: &Scene, bvh: &SceneBvh) -> Option<(usize, f64)> {
 /// Unpolarised Fresnel reflectance of a smooth interface for light arriving with `cos_i = |cos θ_i|`
 /// from the side of index `eta_i` toward index `eta_t`; 1 under total internal reflection.
 pub fn fresnel(cos_i: f64, eta_i: f64, eta_t: f64) -> f64 {
+    if eta_i == eta_t {
+        return 0.0; // index-matched: no interface (and no 0/0 at grazing incidence)
+    }
     let cos_i = cos_i.clamp(0.0, 1.0);
     let sin2_t = (eta_i / eta_t).powi(2) * (1.0 - cos_i * cos_i);
     if sin2_t >= 1.0 {

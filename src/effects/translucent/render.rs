@@ -32,7 +32,11 @@
 //!    sample is the part of a beam between two points, so its response is exactly the beam from its
 //!    start with its entering flux minus the beam from its end with its leaving flux; a node uses the
 //!    flux-weighted starts and ends and the mean direction of its samples. The look-ups go to each
-//!    channel's [`LobeSlice`], extracted from the table once per frame (Sec. 4.1).
+//!    channel's [`LobeSlice`], extracted from the table once per frame (Sec. 4.1). With
+//!    `boundary_image`, each beam's negative image about the boundary plane where its light entered
+//!    (moved out by [`extrapolation_distance`]) is subtracted: the table is an infinite medium.
+//!    Multiple scattering is evaluated at anchor pixels every `smooth_stride` pixels and interpolated
+//!    between ([`super::lowres`], Sec. 5.1's 4 × 4).
 //! 4. *Bounced* (Eq. 8): the surface samples emit diffusely into the object what the scene's indirect
 //!    light sends in (`(1 − F_dr,out)·E_indirect`) and what the surface reflects back from inside
 //!    (`F_dr,in·E_inner`; `E_inner` is `φ/4` of the light scattered at least once, from the table's
@@ -40,7 +44,9 @@
 //!    [`super::surface_light`]); a tree cut over the surface samples gathers their first scattering
 //!    `σ_s L_s A cos e^{−σ_t q}/q² p(q̂·ω)` and, beyond wang2018, the later orders of the same light: the
 //!    table's response to a beam along the node's mean inward normal (flux `S A` from the samples minus
-//!    what is left unscattered at their chords' ends).
+//!    what is left unscattered at their chords' ends, minus its image). The emission is not Lambertian:
+//!    refracted scene light fills the critical cone, reflected light leans to grazing angles
+//!    ([`EmissionProfile`]). Same anchor pixels as multiple scattering.
 //!
 //! **Singularities.** Eq. 6 and Eq. 8's `1/r²` use `max(r, clamp_mfp/σ_t)`; the bias is measured by
 //! the tests (it vanishes as the samples get denser and the clamp smaller).
@@ -55,6 +61,7 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use super::lowres::{self, Plan, SegmentShape};
 use super::octree::{CutEntry, Item, Octree};
 use super::points::{PointOptions, Points, SurfaceSample, VolumeSample};
 use super::{Material, Setup, fresnel, reflect, refract};
@@ -96,8 +103,19 @@ pub struct RenderOptions {
     /// Two-step traversal with 2×2 sharing for single scattering (Sec. 4.3).
     pub two_step: bool,
     /// Most terms of the series of internal reflections of diffuse light ([`super::surface_light`]);
-    /// 1 is wang2018's single reflection.
+    /// 1 is wang2018's single reflection; the series stops early once a term adds little.
     pub reflection_terms: usize,
+    /// Half-space boundary for the table's infinite-medium responses: every beam (volume sample,
+    /// surface sample) also has a negative image, mirrored about the boundary plane where its light
+    /// entered or was last reflected and moved out by the extrapolation distance
+    /// [`extrapolation_distance`], in multiple scattering, the later orders of the boundary's light
+    /// and the inner irradiance of the surface samples. Without it light that leaves the object near
+    /// where it entered is counted as if it scattered back (worst for g = 0).
+    pub boundary_image: bool,
+    /// Multiple and bounced scattering (smooth) are evaluated at every `smooth_stride`-th pixel and
+    /// row and interpolated in between where the segments agree (wang2018 Sec. 5.1 uses 4);
+    /// 1 evaluates every pixel.
+    pub smooth_stride: usize,
     /// Height above the leaves where the first step stops.
     pub stop_height: u8,
     /// Seed of the diffuse rays.
@@ -120,7 +138,9 @@ impl Default for RenderOptions {
             single_layer_mfp: 8.0,
             clamp_mfp: 0.0625,
             two_step: true,
-            reflection_terms: 1,
+            reflection_terms: super::surface_light::SERIES_MAX,
+            boundary_image: true,
+            smooth_stride: 4,
             stop_height: 3,
             seed: 0,
         }
@@ -130,6 +150,12 @@ impl Default for RenderOptions {
 impl RenderOptions {
     /// Range checks; the message names the field.
     pub fn check(&self) -> Result<(), String> {
+        if self.smooth_stride == 0 || self.smooth_stride > 64 {
+            return Err(format!("smooth_stride = {} must lie in 1..=64", self.smooth_stride));
+        }
+        if self.reflection_terms == 0 {
+            return Err("reflection_terms must be ≥ 1".into());
+        }
         if self.k_max == 0 || self.k_max > 4096 {
             return Err(format!("k_max = {} must lie in 1..=4096", self.k_max));
         }
@@ -162,6 +188,11 @@ impl RenderOptions {
     }
 }
 
+/// `x` mirrored about the plane through `q` with unit normal `n`.
+fn mirror_about(x: DVec3, q: DVec3, n: DVec3) -> DVec3 {
+    x - 2.0 * (x - q).dot(n) * n
+}
+
 /// Aggregate of volume samples (a tree node or one sample).
 #[derive(Debug, Clone, Copy, Default)]
 struct VolAgg {
@@ -186,6 +217,15 @@ struct VolAgg {
     /// Bounds of the samples' interval end points (the extent the cuts judge).
     lo: DVec3,
     hi: DVec3,
+    /// Image beams (`boundary_image`): entering-flux-weighted start mirrored about its sample's
+    /// boundary plane, and the weighted outward normals (the shift by `2 z_b` is per channel).
+    istart: DVec3,
+    inormal0: DVec3,
+    /// Leaving-flux-weighted mirrored end and normals.
+    iend: DVec3,
+    inormal1: DVec3,
+    /// Track-length-weighted mirrored directions.
+    idir_sum: DVec3,
 }
 
 impl VolAgg {
@@ -206,6 +246,11 @@ impl VolAgg {
             w1,
             lo: v.start.min(v.end()),
             hi: v.start.max(v.end()),
+            istart: mirror_about(v.start, v.plane_point, v.plane_normal) * w0,
+            inormal0: v.plane_normal * w0,
+            iend: mirror_about(v.end(), v.plane_point, v.plane_normal) * w1,
+            inormal1: v.plane_normal * w1,
+            idir_sum: (v.direction - 2.0 * v.direction.dot(v.plane_normal) * v.plane_normal) * w_lam,
         }
     }
 
@@ -223,6 +268,11 @@ impl VolAgg {
             a.start += p.start;
             a.end += p.end;
             a.dir_sum += p.dir_sum;
+            a.istart += p.istart;
+            a.inormal0 += p.inormal0;
+            a.iend += p.iend;
+            a.inormal1 += p.inormal1;
+            a.idir_sum += p.idir_sum;
             a.w_lam += p.w_lam;
             a.w0 += p.w0;
             a.w1 += p.w1;
@@ -233,6 +283,15 @@ impl VolAgg {
     /// Half the diagonal of the end points' bounds (0 when empty).
     fn radius(&self) -> f64 {
         if self.lo.x <= self.hi.x { 0.5 * (self.hi - self.lo).length() } else { 0.0 }
+    }
+
+    /// The image beam of channel `c` (extrapolation distance `z_b`): (start, end, unit direction).
+    fn image(&self, z_b: f64) -> (DVec3, DVec3, DVec3) {
+        let div = |v: DVec3, w: f64| if w > 0.0 { v / w } else { v };
+        let dir = self.idir_sum.try_normalize().unwrap_or(-DVec3::Z);
+        let start = div(self.istart, self.w0) + 2.0 * z_b * div(self.inormal0, self.w0);
+        let end = div(self.iend, self.w1) + 2.0 * z_b * div(self.inormal1, self.w1);
+        (start, end, dir)
     }
 
     /// The weighted sums divided through: (centre, start, end, unit mean direction).
@@ -246,8 +305,11 @@ impl VolAgg {
 /// Aggregate of surface samples.
 #[derive(Debug, Clone, Copy, Default)]
 struct SurfAgg {
-    /// `Σ L_s A` per channel \[W/sr\] (radiance emitted into the object times area).
-    power: [f64; 3],
+    /// `Σ S_ext A/π` per channel \[W/sr\]: the scene's indirect light refracted in (its radiance
+    /// inside follows the transmitted cone, [`Prepared::emission_profile`]).
+    power_ext: [f64; 3],
+    /// `Σ S_int A/π`: the internally reflected light (its radiance follows `F(θ)`).
+    power_int: [f64; 3],
     /// Flux `Σ S A` emitted into the object, per channel \[W\] (the beam along the inward normal).
     flux0: [f64; 3],
     /// The part of it left unscattered at the chord's end, `Σ S A e^{−σ_t d}`.
@@ -266,7 +328,8 @@ impl SurfAgg {
         let mut a = SurfAgg::default();
         for p in parts {
             for c in 0..3 {
-                a.power[c] += p.power[c];
+                a.power_ext[c] += p.power_ext[c];
+                a.power_int[c] += p.power_int[c];
                 a.flux0[c] += p.flux0[c];
                 a.flux1[c] += p.flux1[c];
             }
@@ -276,6 +339,31 @@ impl SurfAgg {
             a.w += p.w;
         }
         a
+    }
+}
+
+/// Radiance profile of the light the boundary sends into the object, relative to a Lambertian
+/// emitter of the same exitance (both integrate to 1 against `cos θ dω/π` over the inner hemisphere):
+/// the scene's diffuse light refracted in fills the cone inside the critical angle,
+/// `(1 − F(θ)) η² / (1 − F_dr,out)`; the internally reflected light goes mostly to grazing angles,
+/// `F(θ) / F_dr,in` (wang2018 Eq. 8 takes both as Lambertian). `θ` is measured from the inward normal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EmissionProfile {
+    /// Index of refraction inside relative to outside.
+    pub ior: f64,
+    /// `F_dr,out`: diffuse Fresnel reflectance for light arriving from outside.
+    pub f_out: f64,
+    /// `F_dr,in`: the same from inside.
+    pub f_in: f64,
+}
+
+impl EmissionProfile {
+    /// (refracted, reflected) factors at `cos θ = mu`.
+    pub fn factors(&self, mu: f64) -> (f64, f64) {
+        let f = fresnel(mu, self.ior, 1.0);
+        let ext = if self.f_out < 1.0 { (1.0 - f) * self.ior * self.ior / (1.0 - self.f_out) } else { 0.0 };
+        let int = if self.f_in > 0.0 { f / self.f_in } else { 0.0 };
+        (ext, int)
     }
 }
 
@@ -297,6 +385,9 @@ pub struct Prepared {
     /// Per surface sample, the exitance it emits diffusely into the object \[W/m²\] (indirect light and
     /// every internal reflection, [`super::surface_light`]).
     pub exitance: Vec<[f64; 3]>,
+    /// Angular profile of the surface samples' emission: the index of refraction and `F_dr,out`,
+    /// `F_dr,in` ([`EmissionProfile`]).
+    pub emission_profile: EmissionProfile,
     /// Terms of the internal-reflection series summed.
     pub reflection_terms: usize,
     /// Wall time of [`super::points::generate`], the trees and the inner irradiance \[ms\].
@@ -353,8 +444,16 @@ pub fn prepare(
     // table's collision density of orders ≥ 2 (φ/4 of an isotropic field).
     let ch = channels(&m);
     let slices = slices(table, &ch)?;
-    let eval =
-        Evaluator { setup, slices: &slices, opts, ch, vol_tree: &vol_tree, vol_agg: &vol_agg, vol_items: &vol_items };
+    let eval = Evaluator {
+        setup,
+        slices: &slices,
+        opts,
+        ch,
+        vol_tree: &vol_tree,
+        vol_agg: &vol_agg,
+        vol_items: &vol_items,
+        z_b: opts.boundary_image.then(|| extrapolation_distance(&m)),
+    };
     let inner_irradiance: Vec<[f64; 3]> =
         points.surface.par_iter().map(|s| eval.inner_irradiance(s)).collect::<Result<Vec<_>, String>>()?;
 
@@ -381,12 +480,15 @@ pub fn prepare(
         .zip(&emission.exitance)
         .zip(&emission.chord)
         .map(|((s, ex), &d)| {
-            let power: [f64; 3] = std::array::from_fn(|c| ex[c] / PI * s.area);
+            // The exitance splits into the refracted scene light and the internal reflections.
+            let s_ext: [f64; 3] = std::array::from_fn(|c| ((1.0 - f_out) * s.indirect[c]).min(ex[c]));
+            let power_ext: [f64; 3] = std::array::from_fn(|c| s_ext[c] / PI * s.area);
+            let power_int: [f64; 3] = std::array::from_fn(|c| (ex[c] - s_ext[c]).max(0.0) / PI * s.area);
             let flux0: [f64; 3] = std::array::from_fn(|c| ex[c] * s.area);
             let flux1: [f64; 3] = std::array::from_fn(|c| flux0[c] * (-sigma_t[c] * d).exp());
             let end = if d.is_finite() { s.position - s.normal * d } else { s.position };
-            let w = power.iter().sum::<f64>();
-            SurfAgg { power, flux0, flux1, pos: s.position * w, end: end * w, normal: -s.normal * w, w }
+            let w = flux0.iter().sum::<f64>();
+            SurfAgg { power_ext, power_int, flux0, flux1, pos: s.position * w, end: end * w, normal: -s.normal * w, w }
         })
         .collect();
     let surf_agg = surf_tree.bottom_up(
@@ -413,6 +515,7 @@ pub fn prepare(
         inner_irradiance,
         exitance: emission.exitance,
         reflection_terms: emission.terms,
+        emission_profile: EmissionProfile { ior: m.ior, f_out, f_in },
         preprocess_ms: t0.elapsed().as_secs_f64() * 1e3,
         memory_bytes,
     })
@@ -423,6 +526,8 @@ pub fn prepare(
 struct Segment {
     pixel: u32,
     entry: DVec3,
+    /// Unit outward normal of the boundary at `entry` (the plane of the image beams).
+    normal: DVec3,
     /// Unit propagation direction (away from the camera).
     dir: DVec3,
     d_max: f64,
@@ -464,6 +569,8 @@ pub struct FrameStats {
     pub mean_single_nodes: f64,
     /// Table look-ups that failed (a point the table cannot answer) and were counted as 0.
     pub failed_lookups: u64,
+    /// Segments whose multiple and bounced scattering were interpolated ([`super::lowres`]).
+    pub interpolated: usize,
 }
 
 /// A rendered frame, per component and pixel, linear RGB radiance \[W/(m²·sr)\].
@@ -513,6 +620,27 @@ struct Evaluator<'a> {
     vol_tree: &'a Octree,
     vol_agg: &'a [VolAgg],
     vol_items: &'a [VolAgg],
+    /// Extrapolation distance per channel when `boundary_image` is on.
+    z_b: Option<[f64; 3]>,
+}
+
+/// A channel's multiple scattering (orders ≥ 3) is left out when, in an infinite medium, it would
+/// carry less than this share of its single scattering: `Σ_{k≥3} α^k / α = α²/(1 − α)` (oil's red
+/// and blue channels, α = 0.0042 and 0.0995: 1.8e-5 and 1.1e-2).
+pub const MULTIPLE_SHARE_FLOOR: f64 = 0.02;
+
+/// Whether multiple scattering of a channel with albedo `albedo` is evaluated
+/// ([`MULTIPLE_SHARE_FLOOR`]).
+pub fn multiple_needed(albedo: f64) -> bool {
+    albedo > 0.0 && (albedo >= 1.0 || albedo * albedo / (1.0 - albedo) >= MULTIPLE_SHARE_FLOOR)
+}
+
+/// Diffusion's extrapolation distance of an index-matched boundary, `z_b = 2D` per channel with
+/// `D = 1/(3σ_t')` and the reduced extinction `σ_t' = σ_t (1 − α g)` (the partial-current boundary
+/// condition with `A = 1`: the internal reflections are not folded into `A` because the surface
+/// samples re-emit them explicitly, `F_dr,in E_inner`).
+pub fn extrapolation_distance(m: &Material) -> [f64; 3] {
+    std::array::from_fn(|c| 2.0 / (3.0 * m.sigma_t[c] * (1.0 - m.albedo[c] * m.g)))
 }
 
 /// Solid angle of a ball of radius `radius` seen from distance `dist` (capped at 2π inside it).
@@ -562,19 +690,16 @@ impl Evaluator<'_> {
         false
     }
 
-    /// Double (Eq. 6) and multiple (Eq. 7) scattering at `p` toward `w`, per channel, radiance per unit
-    /// length; also the number of cut entries and failed look-ups. Double scattering sums over the
-    /// Algorithm 1 cut; multiple scattering, smooth and costly (six table look-ups per entry), over the
-    /// coarser solid-angle cut at `epsilon_multiple`.
-    fn double_multiple(&self, p: DVec3, w: DVec3, cut: &mut Vec<CutEntry>) -> ([f64; 3], [f64; 3], usize, u64) {
+    /// Double scattering (Eq. 6) at `p` toward `w` over the Algorithm 1 cut, per channel, radiance per
+    /// unit length; also the number of cut entries.
+    fn double(&self, p: DVec3, w: DVec3, cut: &mut Vec<CutEntry>) -> ([f64; 3], usize) {
         cut.clear();
         if self.vol_tree.nodes.is_empty() {
-            return ([0.0; 3], [0.0; 3], 0, 0);
+            return ([0.0; 3], 0);
         }
         self.vol_tree.cut(&[0], |n| self.refine(n, p, w), cut);
-        let (mut dbl, mut mul, mut failed) = ([0.0; 3], [0.0; 3], 0u64);
+        let mut dbl = [0.0; 3];
         let g = self.ch[0].g;
-        let mut entries = cut.len();
         for e in cut.iter() {
             let a = self.entry(e);
             let (center, _, _, dir) = a.points();
@@ -590,26 +715,54 @@ impl Evaluator<'_> {
                 }
             }
         }
+        (dbl, cut.len())
+    }
+
+    /// Multiple scattering (Eq. 7, orders ≥ 3) at `p` toward `w` over the coarser solid-angle cut at
+    /// `epsilon_multiple` (smooth and costly: four table look-ups per entry and channel, eight with the
+    /// image beams); also the number of cut entries and failed look-ups.
+    fn multiple(&self, p: DVec3, w: DVec3, cut: &mut Vec<CutEntry>) -> ([f64; 3], usize, u64) {
+        let (mut mul, mut failed) = ([0.0; 3], 0u64);
+        if self.vol_tree.nodes.is_empty() {
+            return (mul, 0, 0);
+        }
         cut.clear();
         self.coarse_cut(p, cut);
-        entries += cut.len();
         for e in cut.iter() {
             let a = self.entry(e);
             let (_, start, end, dir) = a.points();
             for (c, mc) in mul.iter_mut().enumerate() {
-                if self.ch[c].albedo <= 0.0 || a.phi0[c] <= 0.0 {
+                if !multiple_needed(self.ch[c].albedo) || a.phi0[c] <= 0.0 {
                     continue;
                 }
-                let look = |origin: DVec3| {
+                let look = |origin: DVec3, dir: DVec3| {
                     self.slices[c].multiple_radiance((origin.to_array(), dir.to_array()), p.to_array(), w.to_array())
                 };
-                match (look(start), look(end)) {
-                    (Ok(v0), Ok(v1)) => *mc += (a.phi0[c] * v0 - a.phi1[c] * v1).max(0.0),
-                    _ => failed += 1,
-                }
+                let (v0, v1) = match (look(start, dir), look(end, dir)) {
+                    (Ok(v0), Ok(v1)) => (v0, v1),
+                    _ => {
+                        failed += 1;
+                        continue;
+                    }
+                };
+                let real = (a.phi0[c] * v0 - a.phi1[c] * v1).max(0.0);
+                let image = match self.z_b {
+                    Some(z) => {
+                        let (is, ie, id) = a.image(z[c]);
+                        match (look(is, id), look(ie, id)) {
+                            (Ok(u0), Ok(u1)) => (a.phi0[c] * u0 - a.phi1[c] * u1).max(0.0),
+                            _ => {
+                                failed += 1;
+                                0.0
+                            }
+                        }
+                    }
+                    None => 0.0,
+                };
+                *mc += (real - image).max(0.0);
             }
         }
-        (dbl, mul, entries, failed)
+        (mul, cut.len(), failed)
     }
 
     fn entry(&self, e: &CutEntry) -> &VolAgg {
@@ -653,15 +806,22 @@ impl Evaluator<'_> {
                 }
                 let st = self.sigma(c);
                 let ss = self.ch[c].albedo * st;
-                let fluence = |origin: DVec3| -> Result<f64, String> {
+                let fluence = |origin: DVec3, dir: DVec3| -> Result<f64, String> {
                     let v = p - origin;
                     let z = v.dot(dir);
                     let rho = (v - z * dir).length();
                     // Scattering-event density per unit volume per watt: σ_t³ D(σ_t x) = σ_s φ.
                     Ok(self.slices[c].density(st * rho, st * z)? * st * st * st / ss)
                 };
-                let m = a.phi0[c] * fluence(start)? - a.phi1[c] * fluence(end)?;
-                *o += 0.25 * m.max(0.0);
+                let m = (a.phi0[c] * fluence(start, dir)? - a.phi1[c] * fluence(end, dir)?).max(0.0);
+                let image = match self.z_b {
+                    Some(z) => {
+                        let (is, ie, id) = a.image(z[c]);
+                        (a.phi0[c] * fluence(is, id)? - a.phi1[c] * fluence(ie, id)?).max(0.0)
+                    }
+                    None => 0.0,
+                };
+                *o += 0.25 * (m - image).max(0.0);
             }
         }
         Ok(out)
@@ -692,6 +852,7 @@ pub fn render(
         vol_tree: &prepared.vol_tree,
         vol_agg: &prepared.vol_agg,
         vol_items: &prepared.vol_items,
+        z_b: opts.boundary_image.then(|| extrapolation_distance(&m)),
     };
 
     // Pass 1: camera paths.
@@ -726,18 +887,39 @@ pub fn render(
     let (single_per_seg, single_nodes) = single_pass(&eval, prepared, &segments, w);
     let single_ms = t.elapsed().as_secs_f64() * 1e3;
 
-    // Pass 3: double and multiple scattering.
+    // Pass 3: double scattering at every segment, multiple scattering at the directly planned ones
+    // (the rest is interpolated below, [`super::lowres`]).
     let t = Instant::now();
+    let shapes: Vec<SegmentShape> = segments
+        .iter()
+        .map(|s| SegmentShape {
+            pixel: s.pixel,
+            primary: s.primary,
+            samples: s.samples,
+            d_max: s.d_max,
+            dir: s.dir,
+            normal: s.normal,
+        })
+        .collect();
+    let plan = lowres::plan(w, h, opts.smooth_stride, &shapes);
     let dm: Vec<SegmentDm> = segments
         .par_iter()
-        .map_init(Vec::new, |cut, s| {
+        .zip(&plan)
+        .map_init(Vec::new, |cut, (s, plan)| {
             let (mut dbl, mut mul, mut entries, mut failed) = ([0.0; 3], [0.0; 3], 0usize, 0u64);
             let wc = -s.dir;
             for (d, wts) in camera_samples(s, &m) {
                 let p = s.entry + d * s.dir;
-                let (a, b, e, f) = eval.double_multiple(p, wc, cut);
+                let (a, e) = eval.double(p, wc, cut);
                 entries += e;
-                failed += f;
+                let b = if *plan == Plan::Direct {
+                    let (b, e, f) = eval.multiple(p, wc, cut);
+                    entries += e;
+                    failed += f;
+                    b
+                } else {
+                    [0.0; 3]
+                };
                 for (c, w) in wts.iter().enumerate() {
                     dbl[c] += w * a[c];
                     mul[c] += w * b[c];
@@ -746,14 +928,21 @@ pub fn render(
             (dbl, mul, entries, failed, s.samples as u64)
         })
         .collect();
+    let mut mul_per_seg: Vec<[f64; 3]> = dm.iter().map(|x| x.1).collect();
+    let norms: Vec<[f64; 3]> = segments.iter().map(|s| weight_sums(s, &m)).collect();
+    interpolate(&plan, &norms, &mut mul_per_seg);
     let double_multiple_ms = t.elapsed().as_secs_f64() * 1e3;
 
-    // Pass 4: bounced.
+    // Pass 4: bounced, at the directly planned segments, then interpolated.
     let t = Instant::now();
-    let bounced_per_seg: Vec<[f64; 3]> = segments
+    let mut bounced_per_seg: Vec<[f64; 3]> = segments
         .par_iter()
-        .map_init(Vec::new, |cut, s| {
+        .zip(&plan)
+        .map_init(Vec::new, |cut, (s, plan)| {
             let mut out = [0.0; 3];
+            if *plan != Plan::Direct {
+                return out;
+            }
             for (d, wts) in camera_samples(s, &m) {
                 let p = s.entry + d * s.dir;
                 let b = bounced_at(&eval, prepared, p, -s.dir, cut);
@@ -764,7 +953,9 @@ pub fn render(
             out
         })
         .collect();
+    interpolate(&plan, &norms, &mut bounced_per_seg);
     let bounced_ms = t.elapsed().as_secs_f64() * 1e3;
+    let interpolated = plan.iter().filter(|p| **p != Plan::Direct).count();
 
     let mut frame = Frame {
         width: w,
@@ -776,12 +967,13 @@ pub fn render(
         rest,
         object,
         times: PassTimes { rest_ms, single_ms, double_multiple_ms, bounced_ms },
-        stats: FrameStats { segments: segments.len(), ..Default::default() },
+        stats: FrameStats { segments: segments.len(), interpolated, ..Default::default() },
     };
     let mut entries = 0usize;
     for (k, s) in segments.iter().enumerate() {
         let px = s.pixel as usize;
-        let (dbl, mul, e, f, cs) = dm[k];
+        let (dbl, _, e, f, cs) = dm[k];
+        let mul = mul_per_seg[k];
         entries += e;
         frame.stats.failed_lookups += f;
         frame.stats.camera_samples += cs;
@@ -829,6 +1021,38 @@ fn camera_samples(s: &Segment, m: &Material) -> Vec<(f64, [f64; 3])> {
         .collect()
 }
 
+/// Per channel, the sum of a segment's camera-sample weights (`≈ ∫₀^{d_max} e^{−σ_c t} dt`).
+fn weight_sums(s: &Segment, m: &Material) -> [f64; 3] {
+    let mut out = [0.0; 3];
+    for (_, w) in camera_samples(s, m) {
+        for c in 0..3 {
+            out[c] += w[c];
+        }
+    }
+    out
+}
+
+/// Fills the interpolated segments of `values` from the direct ones: the weight-normalised means of
+/// the taps, times the segment's own weight sum ([`super::lowres`]).
+fn interpolate(plan: &[Plan], norms: &[[f64; 3]], values: &mut [[f64; 3]]) {
+    for (i, p) in plan.iter().enumerate() {
+        let Plan::Interp(taps) = p else { continue };
+        let mut v = [0.0; 3];
+        for &(j, wt) in taps {
+            if wt <= 0.0 {
+                continue;
+            }
+            let (j, wt) = (j as usize, wt);
+            for c in 0..3 {
+                if norms[j][c] > 0.0 {
+                    v[c] += wt * values[j][c] / norms[j][c];
+                }
+            }
+        }
+        values[i] = std::array::from_fn(|c| v[c] * norms[i][c]);
+    }
+}
+
 /// Bounced scattering (Eq. 8) at `p` toward `w`: a tree cut over the surface samples.
 fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut Vec<CutEntry>) -> [f64; 3] {
     let mut out = [0.0; 3];
@@ -870,10 +1094,14 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
         }
         let qh = q / r;
         let cos = nrm.dot(qh).max(0.0);
-        let ph = phase(qh.dot(w), g);
-        for (c, o) in out.iter_mut().enumerate() {
-            let rc = eval.clamp_r(r, c);
-            *o += eval.ch[c].albedo * eval.sigma(c) * a.power[c] * cos * ph * (-eval.sigma(c) * r).exp() / (rc * rc);
+        if cos > 0.0 {
+            let (k_ext, k_int) = prep.emission_profile.factors(cos / nrm.length());
+            let ph = phase(qh.dot(w), g);
+            for (c, o) in out.iter_mut().enumerate() {
+                let rc = eval.clamp_r(r, c);
+                let power = a.power_ext[c] * k_ext + a.power_int[c] * k_int;
+                *o += eval.ch[c].albedo * eval.sigma(c) * power * cos * ph * (-eval.sigma(c) * r).exp() / (rc * rc);
+            }
         }
         // Orders ≥ 2 of the emitted light: the table's response to a beam along the mean inward normal,
         // from the samples' positions with their flux minus from the chords' ends with what is left.
@@ -883,12 +1111,21 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
             if eval.ch[c].albedo <= 0.0 || a.flux0[c] <= 0.0 {
                 continue;
             }
-            let look = |origin: DVec3| {
+            let look = |origin: DVec3, dir: DVec3| {
                 eval.slices[c].radiance((origin.to_array(), dir.to_array()), p.to_array(), w.to_array())
             };
-            let v0 = look(pos).map_or(0.0, |v| v.total);
-            let v1 = if a.flux1[c] > 0.0 { look(end).map_or(0.0, |v| v.total) } else { 0.0 };
-            *o += (a.flux0[c] * v0 - a.flux1[c] * v1).max(0.0);
+            let beam = |pos: DVec3, end: DVec3, dir: DVec3| {
+                let v0 = look(pos, dir).map_or(0.0, |v| v.total);
+                let v1 = if a.flux1[c] > 0.0 { look(end, dir).map_or(0.0, |v| v.total) } else { 0.0 };
+                (a.flux0[c] * v0 - a.flux1[c] * v1).max(0.0)
+            };
+            let real = beam(pos, end, dir);
+            // Image about the sample's own plane (through `pos`, normal `dir`), moved out by `2 z_b`.
+            let image = eval.z_b.map_or(0.0, |z| {
+                let out = -dir * (2.0 * z[c]);
+                beam(pos + out, end - 2.0 * (end - pos).dot(dir) * dir + out, -dir)
+            });
+            *o += (real - image).max(0.0);
         }
     }
     out
@@ -1062,6 +1299,7 @@ impl Tracer<'_> {
                 self.inside(
                     pixel,
                     p - n * EPS,
+                    n,
                     tdir,
                     w,
                     self.opts.camera_bounces,
@@ -1103,7 +1341,19 @@ impl Tracer<'_> {
                 let w: [f64; 3] = std::array::from_fn(|c| thr[c] * rho[c] / nrays as f64 * (1.0 - f) / (eta * eta));
                 let entry = q + h2.t * dir - n2 * EPS;
                 let mut ignored = [0.0; 3];
-                self.inside(pixel, entry, tdir, w, 0, depth + 1, false, self.opts.diffuse_samples, segs, &mut ignored);
+                self.inside(
+                    pixel,
+                    entry,
+                    n2,
+                    tdir,
+                    w,
+                    0,
+                    depth + 1,
+                    false,
+                    self.opts.diffuse_samples,
+                    segs,
+                    &mut ignored,
+                );
             }
         }
     }
@@ -1115,6 +1365,7 @@ impl Tracer<'_> {
         &self,
         pixel: u32,
         entry: DVec3,
+        n_out: DVec3,
         d: DVec3,
         w: [f64; 3],
         bounces: u32,
@@ -1132,7 +1383,7 @@ impl Tracer<'_> {
         if !(d_max > 0.0 && d_max.is_finite()) {
             return;
         }
-        segs.push(Segment { pixel, entry, dir: d, d_max, weight: w, samples: samples as u32, primary });
+        segs.push(Segment { pixel, entry, normal: n_out, dir: d, d_max, weight: w, samples: samples as u32, primary });
         if h.mesh != self.setup.object {
             return;
         }
@@ -1152,6 +1403,7 @@ impl Tracer<'_> {
             self.inside(
                 pixel,
                 exit + nin * EPS,
+                -nin,
                 r,
                 att.map(|a| a * f),
                 bounces - 1,
@@ -1260,6 +1512,7 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
         let s = Segment {
             pixel: 0,
             entry: DVec3::ZERO,
+            normal: -DVec3::Z,
             dir: DVec3::Z,
             d_max: d,
             weight: [1.0; 3],
@@ -1281,6 +1534,7 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
     let s = Segment {
         pixel: 0,
         entry: DVec3::ZERO,
+        normal: -DVec3::Z,
         dir: DVec3::Z,
         d_max: 1e3,
         weight: [1.0; 3],
@@ -1297,6 +1551,29 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
     });
     v.push(Row {
         kind,
+        formula: "Fresnel, index-matched",
+        input: "grazing, cos θ = 0".into(),
+        value: fresnel(0.0, 1.3, 1.3),
+        expect: Expect::Close { to: 0.0, rel: 0.0 },
+    });
+    let profile = EmissionProfile { ior: 1.5, f_out: diffuse_fresnel(1.0, 1.5), f_in: diffuse_fresnel(1.5, 1.0) };
+    v.push(Row {
+        kind,
+        formula: "emission profile (reflected)",
+        input: "η = 1.5, grazing".into(),
+        value: profile.factors(0.0).1,
+        expect: Expect::Close { to: 1.0 / profile.f_in, rel: 1e-12 },
+    });
+    let stiff = Material { sigma_t: [1e-6, 1.0, 1e9], albedo: [1.0, 1.0, 0.0], g: 0.99, ior: 1.5 };
+    v.push(Row {
+        kind,
+        formula: "z_b = 2/(3σ_t(1 − αg))",
+        input: "σ_t = 1e-6, α = 1, g = 0.99".into(),
+        value: extrapolation_distance(&stiff)[0],
+        expect: Expect::Close { to: 2.0 / (3.0 * 1e-6 * 0.01), rel: 1e-9 },
+    });
+    v.push(Row {
+        kind,
         formula: "solid angle",
         input: "inside the ball".into(),
         value: solid_angle(1.0, 0.0),
@@ -1310,4 +1587,87 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
         expect: Expect::Close { to: PI * 1e-18, rel: 1e-6 },
     });
     v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(start: DVec3, direction: DVec3, plane_point: DVec3, plane_normal: DVec3) -> VolumeSample {
+        VolumeSample {
+            start,
+            direction,
+            length: 0.5,
+            flux: [1.0; 3],
+            area: 1e-4,
+            surface: 0,
+            bounce: 0,
+            depth: 0.0,
+            plane_point,
+            plane_normal,
+            tan_entry: 0.0,
+        }
+    }
+
+    /// The image beam of a sample is its interval mirrored about its boundary plane and moved out by
+    /// `2 z_b` (derived by hand: medium z > 0, outward normal −z); a node's image is the flux-weighted
+    /// mean of its samples' images even when their planes differ.
+    #[test]
+    fn image_beams_mirror_about_each_samples_plane() {
+        let sigma = [0.0; 3]; // no attenuation: start and end carry the same weight
+        let d = DVec3::new(0.6, 0.0, 0.8);
+        let a = VolAgg::of_sample(&sample(DVec3::new(0.0, 0.0, 0.5), d, DVec3::ZERO, -DVec3::Z), sigma);
+        let (s, e, dir) = a.image(0.25);
+        assert!((s - DVec3::new(0.0, 0.0, -1.0)).length() < 1e-12, "{s}");
+        assert!((e - DVec3::new(0.3, 0.0, -1.4)).length() < 1e-12, "{e}");
+        assert!((dir - DVec3::new(0.6, 0.0, -0.8)).length() < 1e-12, "{dir}");
+        // A second sample under the plane x = 1 (outward +x), starting 0.2 inside it, along −x.
+        let b = VolAgg::of_sample(&sample(DVec3::new(0.8, 0.0, 2.0), -DVec3::X, DVec3::X, DVec3::X), sigma);
+        let (s2, ..) = b.image(0.25);
+        assert!((s2 - DVec3::new(1.7, 0.0, 2.0)).length() < 1e-12, "{s2}");
+        let (sm, ..) = VolAgg::merge(&[a, b]).image(0.25);
+        assert!((sm - 0.5 * (s + s2)).length() < 1e-12, "{sm}");
+    }
+
+    /// Both emission profiles carry exactly the exitance (`2∫ k(μ) μ dμ = 1`, midpoint rule), the
+    /// refracted light stays inside the critical cone, and an index-matched boundary is Lambertian.
+    #[test]
+    fn emission_profiles_conserve_the_exitance() {
+        let p = EmissionProfile { ior: 1.5, f_out: diffuse_fresnel(1.0, 1.5), f_in: diffuse_fresnel(1.5, 1.0) };
+        let n = 200_000;
+        let (mut ext, mut int) = (0.0, 0.0);
+        for i in 0..n {
+            let mu = (i as f64 + 0.5) / n as f64;
+            let (a, b) = p.factors(mu);
+            ext += 2.0 * a * mu / n as f64;
+            int += 2.0 * b * mu / n as f64;
+        }
+        assert!((ext - 1.0).abs() < 1e-4 && (int - 1.0).abs() < 1e-4, "{ext} {int}");
+        // sin θ_c = 1/1.5: just outside the cone nothing is refracted in, everything is reflected.
+        let mu_c = (1.0 - 1.0 / 2.25f64).sqrt();
+        assert_eq!(p.factors(mu_c - 1e-6).0, 0.0);
+        assert!((p.factors(mu_c - 1e-6).1 - 1.0 / p.f_in).abs() < 1e-12);
+        // At normal incidence F = 0.04: (1 − 0.04)·2.25/(1 − F_dr,out).
+        assert!((p.factors(1.0).0 - 0.96 * 2.25 / (1.0 - p.f_out)).abs() < 1e-12);
+        let m = EmissionProfile { ior: 1.0, f_out: 0.0, f_in: 0.0 };
+        for mu in [0.0, 0.3, 1.0] {
+            assert_eq!(m.factors(mu), (1.0, 0.0));
+        }
+    }
+
+    /// `z_b = 2/(3σ_t(1 − αg))`; the multiple-scattering floor keeps a channel at `α²/(1 − α) ≥ 0.02`.
+    #[test]
+    fn extrapolation_distance_and_multiple_floor() {
+        let m = Material { sigma_t: [10.0, 10.0, 4.0], albedo: [1.0, 0.5, 0.0], g: 0.8, ior: 1.5 };
+        let z = extrapolation_distance(&m);
+        for (got, want) in z.iter().zip([2.0 / 6.0, 2.0 / 18.0, 2.0 / 12.0]) {
+            assert!((got - want).abs() < 1e-15, "{got} vs {want}");
+        }
+        // Oil (wang2018 Table 2): red and blue are left out, green kept.
+        assert_eq!([0.0042, 0.4535, 0.0995].map(multiple_needed), [false, true, false]);
+        assert!(multiple_needed(1.0) && !multiple_needed(0.0));
+        // The floor's crossing: α² = 0.02 (1 − α) at α = (−0.02 + √(0.0004 + 0.08))/2.
+        let a = (-0.02 + (0.0004f64 + 0.08).sqrt()) / 2.0;
+        assert!(multiple_needed(a + 1e-9) && !multiple_needed(a - 1e-9));
+    }
 }

@@ -208,3 +208,66 @@ fn double_scattering_clamp_bias_converges() {
     assert!(d[1] >= d[0] && d[2] >= d[1], "a smaller clamp can only add: {d:?}");
     assert!(d[2] - d[1] < d[1] - d[0], "the added part must shrink: {d:?}");
 }
+
+/// The image beams on an index-matched, high-albedo, isotropic sphere (where an infinite medium
+/// returns most of the light that really leaves): multiple scattering against the path tracer's
+/// paths of ≥ 3 medium events, summed over the object. Measured (12 × 12, 2048 surface samples,
+/// 512 paths): 1.95× the reference without images, 1.36× with them (the single tangent-plane image
+/// does not see the light that leaves around the curved sphere). Checked: with images below 1.5× and
+/// at most half the excess of the infinite medium.
+#[test]
+fn image_beams_remove_the_light_an_infinite_medium_returns() {
+    let s = sphere_scene();
+    let m = Material { sigma_t: [40.0; 3], albedo: [0.95; 3], g: 0.0, ior: 1.0 };
+    let em = [emitter()];
+    let cam = camera(12, 12);
+    let t = table(vec![0.0], vec![0.95]);
+    let base = RenderOptions { camera_bounces: 0, k_max: 8, smooth_stride: 1, ..RenderOptions::default() };
+    let off = run(&s, m, &em, &cam, &t, &RenderOptions { boundary_image: false, ..base });
+    let on = run(&s, m, &em, &cam, &t, &base);
+    let bvh = SceneBvh::build(&s);
+    let setup = Setup { scene: &s, bvh: &bvh, object: 0, material: m, emitters: &em };
+    let r = reference::render(&setup, &cam, &ReferenceOptions { samples: 512, ..ReferenceOptions::default() }, &|_| {});
+    let r3 = sum(&r.components[3], &r.object)[0];
+    let (a, b) = (sum(&off.multiple, &off.object)[0] / r3, sum(&on.multiple, &on.object)[0] / r3);
+    eprintln!("multiple / reference ≥ 3 events: without images {a:.3}, with {b:.3}");
+    assert!(a > 1.5, "the infinite medium should over-count: {a}");
+    assert!(b < 1.5 && b > 0.9 && b - 1.0 < 0.5 * (a - 1.0), "without {a}, with {b}");
+}
+
+/// Multiple and bounced scattering on a 4 × 4 anchor grid: the anchor pixels are exactly the
+/// every-pixel frame's, double scattering is untouched, and the interpolated object sums stay within
+/// 4 % of evaluating every pixel (measured on this 16 × 16 view, 85 of 280 segments interpolated:
+/// multiple −1.2 / −1.7 / −1.7 %, bounced −0.5 / +0.1 / +2.4 %).
+#[test]
+fn smooth_components_interpolate_between_anchor_pixels() {
+    let s = sphere_scene();
+    let m = Material { sigma_t: [60.0, 40.0, 20.0], albedo: [0.95, 0.9, 0.7], g: 0.0, ior: 1.5 };
+    let em = [emitter()];
+    let (w, h) = (16, 16);
+    let cam = camera(w, h);
+    let t = table(vec![0.0], vec![0.7, 0.9, 0.95]);
+    let o = RenderOptions { k_max: 4, ..RenderOptions::default() };
+    let every = run(&s, m, &em, &cam, &t, &RenderOptions { smooth_stride: 1, ..o });
+    let grid = run(&s, m, &em, &cam, &t, &RenderOptions { smooth_stride: 4, ..o });
+    assert_eq!(every.stats.interpolated, 0);
+    assert!(grid.stats.interpolated > grid.stats.segments / 4, "{:?}", grid.stats);
+    assert_eq!(every.double, grid.double);
+    let anchor = |x: usize, n: usize| x.is_multiple_of(4) || x == n - 1;
+    for y in 0..h {
+        for x in 0..w {
+            if anchor(x, w) && anchor(y, h) {
+                let i = x + y * w;
+                assert_eq!(every.multiple[i], grid.multiple[i], "pixel {x}, {y}");
+                assert_eq!(every.bounced[i], grid.bounced[i], "pixel {x}, {y}");
+            }
+        }
+    }
+    for (label, a, b) in [("multiple", &every.multiple, &grid.multiple), ("bounced", &every.bounced, &grid.bounced)] {
+        let (sa, sb) = (sum(a, &every.object), sum(b, &every.object));
+        eprintln!("{label}: every pixel {sa:?}, anchors {sb:?}");
+        for c in 0..3 {
+            assert!((sb[c] / sa[c] - 1.0).abs() < 0.04, "{label} channel {c}: {} vs {}", sb[c], sa[c]);
+        }
+    }
+}
