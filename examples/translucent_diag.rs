@@ -3,8 +3,9 @@
 //! pipeline's settings (48 × 48, 2048 surface samples, k_max 4).
 //!
 //! **Input → output.** A Table 2 material name, reference paths per pixel per seed, and optional
-//! `key=value` knobs (`k_max`, `eps1`, `eps2`, `epsm`, `clamp`, `surf`, `terms`, `ior` (override the
-//! object's), `black=1` (black ground: the lamp alone lights the object)) → per component (rest,
+//! `key=value` knobs (`k_max`, `eps1`, `eps2`, `epsm`, `clamp`, `surf`, `terms`, `image=0|1` (image
+//! beams), `stride` (anchor-pixel stride), `ior` (override the object's), `black=1` (black ground: the
+//! lamp alone lights the object), `dump=PATH` (both images and the components as JSON)) → per component (rest,
 //! single, double, multiple + bounced against the reference's 0 / 1 / 2 / ≥ 3 medium events) the
 //! normalised MSE, the reference's own noise from two independent seeds (`E[(A − B)²]/4` for their
 //! mean), their difference, and the ratio of the component sums over the object's pixels (the bias).
