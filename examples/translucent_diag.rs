@@ -5,7 +5,7 @@
 //! **Input → output.** A Table 2 material name, reference paths per pixel per seed, and optional
 //! `key=value` knobs (`k_max`, `eps1`, `eps2`, `epsm`, `clamp`, `surf`, `terms`, `image=0|1` (image
 //! beams), `stride` (anchor-pixel stride), `ior` (override the object's), `black=1` (black ground: the
-//! lamp alone lights the object), `drays` (diffuse rays per primary opaque hit), `dump=PATH` (both images and the components as JSON)) → per component (rest,
+//! lamp alone lights the object), `drays` (diffuse rays per primary opaque hit), `dump=PATH` (both images and the components as JSON), `table=PATH` (another `MsLobes` table)) → per component (rest,
 //! single, double, multiple + bounced against the reference's 0 / 1 / 2 / ≥ 3 medium events) the
 //! normalised MSE, the reference's own noise from two independent seeds (`E[(A − B)²]/4` for their
 //! mean), their difference, and the ratio of the component sums over the object's pixels (the bias).
@@ -48,7 +48,9 @@ fn main() {
     let setup = Setup { scene: &scene, bvh: &bvh, object, material, emitters: &ems };
     let m = voltab::tables::ms_lobes::material(&name).unwrap();
     let needs: Vec<(f64, f64)> = m.albedo.iter().map(|&a| (a, m.g)).collect();
-    let table = MsLobesTable::open(std::path::Path::new("out/ms_lobes_table2.vtab"), Some(&needs)).unwrap();
+    let table_path =
+        args[3..].iter().find_map(|kv| kv.strip_prefix("table=")).unwrap_or("out/ms_lobes_table2.vtab").to_string();
+    let table = MsLobesTable::open(std::path::Path::new(&table_path), Some(&needs)).unwrap();
     let w = 48;
     let cam = ViewCamera::from_scene(&scene.cameras[0], w, w).unwrap();
     let mut popts = PointOptions { surface_samples: 2048, ..PointOptions::default() };
@@ -66,7 +68,7 @@ fn main() {
             "image" => ropts.boundary_image = v == "1",
             "stride" => ropts.smooth_stride = v.parse().unwrap(),
             "drays" => ropts.diffuse_rays = v.parse().unwrap(),
-            "ior" | "black" | "dump" => {}
+            "ior" | "black" | "dump" | "table" => {}
             _ => panic!("unknown {k}"),
         }
     }
