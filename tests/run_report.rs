@@ -25,6 +25,7 @@ fn no_arguments_runs_the_embedded_default_pipeline() {
             "hg_extreme.vtab",
             "hg_grid.vtab",
             "ms_lobes_table2.vtab",
+            "ms_lobes_wax_full.vtab",
             "pop_realtime.vtab",
             "zh_dubouchet.vtab"
         ]

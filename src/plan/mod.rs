@@ -338,26 +338,43 @@ fn plan_phase_hg(t: &ValidatedTable, d: &PhaseHg, needs: &Needs) -> TablePlan {
     compiled(t, format!("{} of {} g slices: scene media have g {r}", kept.len(), nodes.len()), items, def)
 }
 
-/// A g a `PhaseHg` table lacks is only missing when no other `PhaseHg` table of the pipeline spans it
-/// (tables such as `hg_dubouchet` serve one consumer's narrower range).
+/// A g (or, for `MsLobes`, an albedo) a table lacks is only missing when no other table of the same
+/// kind in the pipeline spans it (tables such as `hg_dubouchet` serve one consumer's narrower range, and
+/// a φ-resolved `MsLobes` table may hold one material beside the table that covers them all).
 fn covered_elsewhere(p: &ValidatedPipeline, mut tables: Vec<TablePlan>) -> Vec<TablePlan> {
-    let spans: Vec<(String, f64, f64)> = p
-        .tables()
-        .iter()
-        .filter_map(|t| match t.def() {
+    // (kind, id, axis, lo, hi)
+    let mut spans: Vec<(&str, String, &str, f64, f64)> = Vec::new();
+    for t in p.tables() {
+        let id = t.id().to_string();
+        match t.def() {
             TableDef::PhaseHg(d) => {
                 let v = d.g.values();
-                Some((t.id().to_string(), *v.first()?, *v.last()?))
+                if let (Some(lo), Some(hi)) = (v.first(), v.last()) {
+                    spans.push(("PhaseHg", id, "g", *lo, *hi));
+                }
             }
-            _ => None,
-        })
-        .collect();
-    for t in tables.iter_mut().filter(|t| t.kind == "PhaseHg") {
+            TableDef::MsLobes(d) => {
+                for (axis, v) in [("g", d.g_values()), ("albedo", d.albedo_values())] {
+                    let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+                    let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                    if lo <= hi {
+                        spans.push(("MsLobes", id.clone(), axis, lo, hi));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    for t in tables.iter_mut().filter(|t| t.kind == "PhaseHg" || t.kind == "MsLobes") {
         for item in t.items.iter_mut().filter(|i| i.decision == Decision::Missing) {
-            let Some(g) = item.what.strip_prefix("g = ").and_then(|v| v.parse::<f64>().ok()) else { continue };
-            if let Some((id, _, _)) = spans.iter().find(|(id, lo, hi)| *id != t.id && *lo <= g && g <= *hi) {
+            let Some((axis, v)) = item.what.split_once(" = ") else { continue };
+            let Ok(x) = v.parse::<f64>() else { continue };
+            let other = spans.iter().find(|(kind, id, ax, lo, hi)| {
+                *kind == t.kind && *id != t.id && *ax == axis && *lo <= x && x <= *hi
+            });
+            if let Some((_, id, ..)) = other {
                 item.decision = Decision::Skip;
-                item.reason = format!("outside this table's g range; table {id} covers it");
+                item.reason = format!("outside this table's {axis} range; table {id} covers it");
             }
         }
     }

@@ -84,6 +84,14 @@ fn a_translucent_object_needs_lobes_but_no_volume_to_surface_tables() {
         (Decision::Skip, "outside this table's g range; table hg_grid covers it")
     );
     assert!(!plan.has_missing());
+    // The φ-resolved Wax table holds g = 0.8 and Wax's albedos only: this scene's g = 0.7 is covered by
+    // ms_lobes_table2, so nothing is missing and the Wax table (no bracketing slice) is skipped.
+    let wax = item(table(&plan, "ms_lobes_wax_full"), "g = 0.7");
+    assert_eq!(
+        (wax.decision, wax.reason.as_str()),
+        (Decision::Skip, "outside this table's g range; table ms_lobes_table2 covers it")
+    );
+    assert_eq!(table(&plan, "ms_lobes_wax_full").decision, Decision::Skip);
     let ms = table(&plan, "ms_lobes_table2");
     let Some(TableDef::MsLobes(d)) = &ms.def else { panic!() };
     // Every channel albedo (0.99, 0.95, 0.9) has its nodes below and above kept, and nothing else is.
