@@ -369,9 +369,9 @@ fn covered_elsewhere(p: &ValidatedPipeline, mut tables: Vec<TablePlan>) -> Vec<T
         for item in t.items.iter_mut().filter(|i| i.decision == Decision::Missing) {
             let Some((axis, v)) = item.what.split_once(" = ") else { continue };
             let Ok(x) = v.parse::<f64>() else { continue };
-            let other = spans.iter().find(|(kind, id, ax, lo, hi)| {
-                *kind == t.kind && *id != t.id && *ax == axis && *lo <= x && x <= *hi
-            });
+            let other = spans
+                .iter()
+                .find(|(kind, id, ax, lo, hi)| *kind == t.kind && *id != t.id && *ax == axis && *lo <= x && x <= *hi);
             if let Some((_, id, ..)) = other {
                 item.decision = Decision::Skip;
                 item.reason = format!("outside this table's {axis} range; table {id} covers it");
