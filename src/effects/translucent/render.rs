@@ -250,7 +250,7 @@ impl VolAgg {
             inormal0: v.plane_normal * w0,
             iend: mirror_about(v.end(), v.plane_point, v.plane_normal) * w1,
             inormal1: v.plane_normal * w1,
-            idir_sum: (v.direction - 2.0 * v.direction.dot(v.plane_normal) * v.plane_normal) * w_lam,
+            idir_sum: mirror_about(v.direction, DVec3::ZERO, v.plane_normal) * w_lam,
         }
     }
 
@@ -444,16 +444,7 @@ pub fn prepare(
     // table's collision density of orders ≥ 2 (φ/4 of an isotropic field).
     let ch = channels(&m);
     let slices = slices(table, &ch)?;
-    let eval = Evaluator {
-        setup,
-        slices: &slices,
-        opts,
-        ch,
-        vol_tree: &vol_tree,
-        vol_agg: &vol_agg,
-        vol_items: &vol_items,
-        z_b: opts.boundary_image.then(|| extrapolation_distance(&m)),
-    };
+    let eval = Evaluator::new(setup, &slices, opts, (&vol_tree, &vol_agg, &vol_items));
     let inner_irradiance: Vec<[f64; 3]> =
         points.surface.par_iter().map(|s| eval.inner_irradiance(s)).collect::<Result<Vec<_>, String>>()?;
 
@@ -538,8 +529,10 @@ struct Segment {
     primary: bool,
 }
 
-/// Per segment: double, multiple, cut entries, failed look-ups, camera samples.
-type SegmentDm = ([f64; 3], [f64; 3], usize, u64, u64);
+/// Per segment: double, multiple, cut entries, failed look-ups, camera samples, and per channel the
+/// sum of the camera-sample weights (`≈ ∫₀^{d_max} e^{−σ_c t} dt`, what [`super::lowres`]
+/// normalises by).
+type SegmentDm = ([f64; 3], [f64; 3], usize, u64, u64, [f64; 3]);
 /// Per group of segments: (segment, single scattering) and nodes tested.
 type GroupSingle = (Vec<(usize, [f64; 3])>, usize);
 
@@ -657,7 +650,26 @@ fn half_diagonal(b: &(DVec3, DVec3)) -> f64 {
     0.5 * (b.1 - b.0).length()
 }
 
-impl Evaluator<'_> {
+impl<'a> Evaluator<'a> {
+    fn new(
+        setup: &'a Setup<'a>,
+        slices: &'a [LobeSlice<'a>],
+        opts: &'a RenderOptions,
+        (vol_tree, vol_agg, vol_items): (&'a Octree, &'a [VolAgg], &'a [VolAgg]),
+    ) -> Self {
+        let m = setup.material;
+        Evaluator {
+            setup,
+            slices,
+            opts,
+            ch: channels(&m),
+            vol_tree,
+            vol_agg,
+            vol_items,
+            z_b: opts.boundary_image.then(|| extrapolation_distance(&m)),
+        }
+    }
+
     fn sigma(&self, c: usize) -> f64 {
         self.ch[c].sigma_t
     }
@@ -726,13 +738,14 @@ impl Evaluator<'_> {
         if self.vol_tree.nodes.is_empty() {
             return (mul, 0, 0);
         }
+        let needed = self.ch.map(|ch| multiple_needed(ch.albedo));
         cut.clear();
         self.coarse_cut(p, cut);
         for e in cut.iter() {
             let a = self.entry(e);
             let (_, start, end, dir) = a.points();
             for (c, mc) in mul.iter_mut().enumerate() {
-                if !multiple_needed(self.ch[c].albedo) || a.phi0[c] <= 0.0 {
+                if !needed[c] || a.phi0[c] <= 0.0 {
                     continue;
                 }
                 let look = |origin: DVec3, dir: DVec3| {
@@ -844,16 +857,7 @@ pub fn render(
     let m = setup.material;
     let ch = channels(&m);
     let slices = slices(table, &ch)?;
-    let eval = Evaluator {
-        setup,
-        slices: &slices,
-        opts,
-        ch,
-        vol_tree: &prepared.vol_tree,
-        vol_agg: &prepared.vol_agg,
-        vol_items: &prepared.vol_items,
-        z_b: opts.boundary_image.then(|| extrapolation_distance(&m)),
-    };
+    let eval = Evaluator::new(setup, &slices, opts, (&prepared.vol_tree, &prepared.vol_agg, &prepared.vol_items));
 
     // Pass 1: camera paths.
     let t = Instant::now();
@@ -906,7 +910,7 @@ pub fn render(
         .par_iter()
         .zip(&plan)
         .map_init(Vec::new, |cut, (s, plan)| {
-            let (mut dbl, mut mul, mut entries, mut failed) = ([0.0; 3], [0.0; 3], 0usize, 0u64);
+            let (mut dbl, mut mul, mut entries, mut failed, mut norm) = ([0.0; 3], [0.0; 3], 0usize, 0u64, [0.0; 3]);
             let wc = -s.dir;
             for (d, wts) in camera_samples(s, &m) {
                 let p = s.entry + d * s.dir;
@@ -923,13 +927,14 @@ pub fn render(
                 for (c, w) in wts.iter().enumerate() {
                     dbl[c] += w * a[c];
                     mul[c] += w * b[c];
+                    norm[c] += w;
                 }
             }
-            (dbl, mul, entries, failed, s.samples as u64)
+            (dbl, mul, entries, failed, s.samples as u64, norm)
         })
         .collect();
     let mut mul_per_seg: Vec<[f64; 3]> = dm.iter().map(|x| x.1).collect();
-    let norms: Vec<[f64; 3]> = segments.iter().map(|s| weight_sums(s, &m)).collect();
+    let norms: Vec<[f64; 3]> = dm.iter().map(|x| x.5).collect();
     interpolate(&plan, &norms, &mut mul_per_seg);
     let double_multiple_ms = t.elapsed().as_secs_f64() * 1e3;
 
@@ -972,7 +977,7 @@ pub fn render(
     let mut entries = 0usize;
     for (k, s) in segments.iter().enumerate() {
         let px = s.pixel as usize;
-        let (dbl, _, e, f, cs) = dm[k];
+        let (dbl, _, e, f, cs, _) = dm[k];
         let mul = mul_per_seg[k];
         entries += e;
         frame.stats.failed_lookups += f;
@@ -1019,17 +1024,6 @@ fn camera_samples(s: &Segment, m: &Material) -> Vec<(f64, [f64; 3])> {
             (d, wts)
         })
         .collect()
-}
-
-/// Per channel, the sum of a segment's camera-sample weights (`≈ ∫₀^{d_max} e^{−σ_c t} dt`).
-fn weight_sums(s: &Segment, m: &Material) -> [f64; 3] {
-    let mut out = [0.0; 3];
-    for (_, w) in camera_samples(s, m) {
-        for c in 0..3 {
-            out[c] += w[c];
-        }
-    }
-    out
 }
 
 /// Fills the interpolated segments of `values` from the direct ones: the weight-normalised means of
@@ -1123,7 +1117,7 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
             // Image about the sample's own plane (through `pos`, normal `dir`), moved out by `2 z_b`.
             let image = eval.z_b.map_or(0.0, |z| {
                 let out = -dir * (2.0 * z[c]);
-                beam(pos + out, end - 2.0 * (end - pos).dot(dir) * dir + out, -dir)
+                beam(pos + out, mirror_about(end, pos, dir) + out, -dir)
             });
             *o += (real - image).max(0.0);
         }
