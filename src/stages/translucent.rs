@@ -70,6 +70,9 @@ crate::declare_params! {
         camera_bounces: u32 = 1, unit = "reflections", range = "0 to 16";
         /// Rays per surface sample gathering the scene's indirect diffuse light (0: none).
         indirect_rays: u32 = 16, unit = "rays", range = "0 to 4096";
+        /// The object's light on the scene: its caustic and glow on opaque surfaces, from photons of the light
+        /// rays that leave it (seen directly, through the object, and by the surface samples' indirect rays).
+        object_light: bool = true, unit = "", range = "true or false";
         /// Camera samples k_max per segment of a ray reaching the object directly (Eq. 10).
         k_max: u32 = 16, unit = "samples", range = "1 to 4096";
         /// Rays per visible opaque pixel looking for the object's glow (diffuse bounce; 0: none).
@@ -225,6 +228,7 @@ impl TranslucentRender {
             samples_per_ray: self.samples_per_ray as usize,
             light_bounces: self.light_bounces,
             indirect_rays: self.indirect_rays,
+            object_light: self.object_light,
             ..PointOptions::default()
         }
     }

@@ -31,6 +31,7 @@
 
 pub mod compare;
 pub mod lowres;
+pub mod object_light;
 pub mod octree;
 pub mod points;
 pub mod reference;

@@ -41,6 +41,7 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use super::object_light::{CAUSTIC_K, GLOW_K, ObjectLight, Photon, PhotonMap, glow_photon, land};
 use super::{Emitter, Setup, fresnel, reflect, refract};
 use crate::physics::rng::StreamKey;
 use crate::scene::Surface;
@@ -61,6 +62,9 @@ pub struct PointOptions {
     pub indirect_rays: u32,
     /// Seed of every random stream.
     pub seed: u64,
+    /// Trace the light that leaves the object onto the scene's opaque surfaces (caustic and glow
+    /// photon maps, [`super::object_light`]).
+    pub object_light: bool,
 }
 
 impl Default for PointOptions {
@@ -72,6 +76,7 @@ impl Default for PointOptions {
             light_bounces: 2,
             indirect_rays: 16,
             seed: 0,
+            object_light: true,
         }
     }
 }
@@ -209,6 +214,8 @@ pub struct PointStats {
     pub volume_ms: f64,
     /// Wall time of the indirect irradiance \[ms\].
     pub indirect_ms: f64,
+    /// Wall time of the object's caustic and glow photons \[ms\].
+    pub photon_ms: f64,
     /// Light rays that entered the object.
     pub light_rays: u64,
     /// Total internal reflections met at exit facets.
@@ -228,6 +235,8 @@ pub struct Points {
     pub surface: Vec<SurfaceSample>,
     /// Volume samples, grouped by surface sample, then emitter, then along the ray.
     pub volume: Vec<VolumeSample>,
+    /// The object's light on the scene (empty unless [`PointOptions::object_light`]).
+    pub object_light: ObjectLight,
     /// Counts and timings.
     pub stats: PointStats,
 }
@@ -236,6 +245,7 @@ pub struct Points {
 const CELL_CANDIDATES: u64 = 0x5eed_0001;
 const CELL_EMITTER: u64 = 0x5eed_0002;
 const CELL_INDIRECT: u64 = 0x5eed_0003;
+const CELL_GLOW: u64 = 0x5eed_0004;
 
 /// Builds the surface and volume samples of `setup` (see the module doc).
 pub fn generate(setup: &Setup, opts: &PointOptions) -> Result<Points, String> {
@@ -281,6 +291,7 @@ pub fn generate(setup: &Setup, opts: &PointOptions) -> Result<Points, String> {
         samples_per_ray: opts.samples_per_ray,
         light_bounces: opts.light_bounces,
         eps,
+        object_light: opts.object_light,
     };
     let t1 = Instant::now();
     let lit: Vec<SampleLight> = samples
@@ -290,15 +301,40 @@ pub fn generate(setup: &Setup, opts: &PointOptions) -> Result<Points, String> {
         .collect();
     let volume_ms = ms(t1);
 
+    // The object's light on the scene: photons of the transmitted and the scattered light.
+    let t3 = Instant::now();
+    let mut object_light = ObjectLight::default();
+    if opts.object_light {
+        let glow: Vec<Vec<Photon>> = lit
+            .par_iter()
+            .enumerate()
+            .map(|(i, l)| {
+                let key = StreamKey { table: opts.seed, cell: CELL_GLOW ^ ((i as u64) << 20) };
+                l.volume
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(j, v)| glow_photon(setup, v, key.sample(j as u64), eps))
+                    .collect()
+            })
+            .collect();
+        let r_max = 0.25 * (hi - lo).length();
+        let caustic = lit.iter().flat_map(|l| l.caustic.iter().copied()).collect();
+        object_light = ObjectLight {
+            caustic: PhotonMap::build(caustic, CAUSTIC_K, r_max),
+            glow: PhotonMap::build(glow.into_iter().flatten().collect(), GLOW_K, r_max),
+        };
+    }
+    let photon_ms = ms(t3);
+
     let t2 = Instant::now();
     let indirect: Vec<[f64; 3]> = samples
         .par_iter()
         .enumerate()
-        .map(|(i, &(p, ti))| indirect_irradiance(&ctx, i as u64, p, tris[ti].normal, opts))
+        .map(|(i, &(p, ti))| indirect_irradiance(&ctx, &object_light, i as u64, p, tris[ti].normal, opts))
         .collect();
     let indirect_ms = ms(t2);
 
-    let mut stats = PointStats { surface_ms, volume_ms, indirect_ms, ..PointStats::default() };
+    let mut stats = PointStats { surface_ms, volume_ms, indirect_ms, photon_ms, ..PointStats::default() };
     let mut lost = [0.0; 3];
     let mut surface = Vec::with_capacity(samples.len());
     let mut volume = Vec::with_capacity(lit.iter().map(|l| l.volume.len()).sum());
@@ -321,7 +357,7 @@ pub fn generate(setup: &Setup, opts: &PointOptions) -> Result<Points, String> {
     }
     let entered: f64 = stats.entered_flux.iter().sum();
     stats.lost_flux_fraction = if entered > 0.0 { lost.iter().sum::<f64>() / entered } else { 0.0 };
-    Ok(Points { surface, volume, stats })
+    Ok(Points { surface, volume, object_light, stats })
 }
 
 fn ms(t: Instant) -> f64 {
@@ -505,6 +541,8 @@ struct LightCtx<'a> {
     light_bounces: u32,
     /// Ray offset from surfaces \[m\].
     eps: f64,
+    /// Land the transmitted flux of exit facets as caustic photons.
+    object_light: bool,
 }
 
 /// The light tube of one ray: `A(t) = area_cos·(1 + t/d_s)(1 + t/d_t)`.
@@ -552,7 +590,7 @@ fn max3(a: [f64; 3]) -> f64 {
 }
 
 /// Follows one refracted light ray inside the object, appending its intervals to `out`.
-fn trace(ctx: &LightCtx, ray: &Entering, out: &mut Vec<VolumeSample>) -> RayBudget {
+fn trace(ctx: &LightCtx, ray: &Entering, out: &mut Vec<VolumeSample>, caustic: &mut Vec<Photon>) -> RayBudget {
     let bvh = ctx.setup.bvh;
     let mut res = RayBudget::default();
     let mut origin = ray.point - ray.normal * ctx.eps;
@@ -586,6 +624,14 @@ fn trace(ctx: &LightCtx, ray: &Entering, out: &mut Vec<VolumeSample>) -> RayBudg
         }
         let reflected = at_s.map(|x| f * x);
         (0..3).for_each(|c| res.transmitted[c] += at_s[c] - reflected[c]);
+        if ctx.object_light
+            && f < 1.0
+            && let Some(out_dir) = refract(dir, n, ctx.eta, 1.0)
+        {
+            let exit = origin + dir * t_exit;
+            let gone: [f64; 3] = std::array::from_fn(|c| at_s[c] - reflected[c]);
+            caustic.extend(land(ctx.setup, exit + n * ctx.eps, out_dir, gone));
+        }
         if bounce >= ctx.light_bounces || max3(reflected).is_nan() || max3(reflected) <= 1e-4 * entering {
             (0..3).for_each(|c| res.lost[c] += reflected[c]);
             return res;
@@ -657,6 +703,7 @@ fn tan_to(dir: DVec3, n: DVec3) -> f64 {
 struct SampleLight {
     direct: [f64; 3],
     volume: Vec<VolumeSample>,
+    caustic: Vec<Photon>,
     rays: u64,
     tir: u64,
     entered: [f64; 3],
@@ -723,7 +770,7 @@ fn light_sample(ctx: &LightCtx, i: u32, x: DVec3, n: DVec3, area: f64, seed: u64
         ray.surface = i;
         out.rays += 1;
         (0..3).for_each(|c| out.entered[c] += ray.flux[c]);
-        let b = trace(ctx, &ray, &mut out.volume);
+        let b = trace(ctx, &ray, &mut out.volume, &mut out.caustic);
         out.tir += b.tir;
         (0..3).for_each(|c| out.lost[c] += b.lost[c]);
     }
@@ -731,7 +778,14 @@ fn light_sample(ctx: &LightCtx, i: u32, x: DVec3, n: DVec3, area: f64, seed: u64
 }
 
 /// One-bounce diffuse irradiance at `x` (outward normal `n`) from the scene's opaque meshes.
-fn indirect_irradiance(ctx: &LightCtx, i: u64, x: DVec3, n: DVec3, opts: &PointOptions) -> [f64; 3] {
+fn indirect_irradiance(
+    ctx: &LightCtx,
+    object_light: &ObjectLight,
+    i: u64,
+    x: DVec3,
+    n: DVec3,
+    opts: &PointOptions,
+) -> [f64; 3] {
     let k = opts.indirect_rays;
     if k == 0 || ctx.setup.emitters.is_empty() {
         return [0.0; 3];
@@ -770,6 +824,8 @@ fn indirect_irradiance(ctx: &LightCtx, i: u64, x: DVec3, n: DVec3, opts: &PointO
         }
         let p = o + d * h.t;
         let po = p + nh * ctx.eps;
+        let e_obj = object_light.irradiance(p, nh, true);
+        (0..3).for_each(|ch| sum[ch] += rho[ch] / PI * e_obj[ch]);
         for e in setup.emitters {
             let v = e.center - po;
             let de = v.length();
@@ -980,6 +1036,7 @@ mod tests {
             samples_per_ray: 5,
             light_bounces: bounces,
             eps: 1e-6,
+            object_light: false,
         }
     }
 
@@ -1009,7 +1066,7 @@ mod tests {
             surface: 7,
         };
         let mut out = Vec::new();
-        let b = trace(&ctx, &ray, &mut out);
+        let b = trace(&ctx, &ray, &mut out, &mut Vec::new());
         let s1 = 0.8 / st; // to x = −0.5
         let y1 = 0.5 - s1 * ct;
         let s2 = (y1 + 0.5) / ct; // then to y = −0.5
@@ -1033,7 +1090,7 @@ mod tests {
     /// Σ over a ray's intervals of (flux in − flux out) + transmitted + cut-off flux = entering flux.
     fn assert_conserved(ctx: &LightCtx, ray: &Entering) -> RayBudget {
         let mut out = Vec::new();
-        let b = trace(ctx, ray, &mut out);
+        let b = trace(ctx, ray, &mut out, &mut Vec::new());
         for k in 0..3 {
             let absorbed: f64 = out.iter().map(|v| -v.flux[k] * (-ctx.sigma_t[k] * v.length).exp_m1()).sum();
             let total = absorbed + b.transmitted[k] + b.lost[k];

@@ -62,6 +62,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::lowres::{self, Plan, SegmentShape};
+use super::object_light::ObjectLight;
 use super::octree::{CutEntry, Item, Octree};
 use super::points::{PointOptions, Points, SurfaceSample, VolumeSample};
 use super::{Material, Setup, fresnel, reflect, refract};
@@ -494,7 +495,8 @@ pub fn prepare(
         + (vol_tree.nodes.len() + surf_tree.nodes.len()) * std::mem::size_of::<super::octree::Node>()
         + (vol_tree.items.len() + surf_tree.items.len()) * 4
         + inner_irradiance.len() * 24
-        + emission.exitance.len() * 32;
+        + emission.exitance.len() * 32
+        + points.object_light.memory_bytes();
     Ok(Prepared {
         points,
         vol_tree,
@@ -861,7 +863,7 @@ pub fn render(
 
     // Pass 1: camera paths.
     let t = Instant::now();
-    let tracer = Tracer { setup, opts };
+    let tracer = Tracer { setup, opts, light: &prepared.points.object_light };
     let per_pixel: Vec<(Vec<Segment>, [f64; 3], bool)> = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -1210,6 +1212,8 @@ fn single_pass(eval: &Evaluator, prep: &Prepared, segments: &[Segment], width: u
 struct Tracer<'a> {
     setup: &'a Setup<'a>,
     opts: &'a RenderOptions,
+    /// The object's caustic and glow on opaque surfaces.
+    light: &'a ObjectLight,
 }
 
 /// Offset of secondary rays from surfaces \[m\].
@@ -1310,8 +1314,11 @@ impl Tracer<'_> {
         let nf = if n.dot(d) > 0.0 { -n } else { n };
         let rho = self.setup.albedo_of(h.mesh);
         let direct = self.direct(p + nf * EPS, nf, pixel);
+        // The object's light on the surface; its glow is gathered by the diffuse rays instead when
+        // they are on.
+        let object = self.light.irradiance(p, nf, !(primary && self.opts.diffuse_rays > 0));
         for c in 0..3 {
-            rest[c] += thr[c] * rho[c] / PI * direct[c];
+            rest[c] += thr[c] * rho[c] / PI * (direct[c] + object[c]);
         }
         if primary && self.opts.diffuse_rays > 0 && rho.iter().any(|&r| r > 0.0) {
             let key = StreamKey { table: self.opts.seed ^ 0x7a3c_0de5_1bad_5eed, cell: pixel as u64 };
@@ -1580,6 +1587,7 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
         value: solid_angle(1e-9, 1.0),
         expect: Expect::Close { to: PI * 1e-18, rel: 1e-6 },
     });
+    v.extend(super::object_light::stability_rows());
     v
 }
 
