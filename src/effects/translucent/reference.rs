@@ -89,8 +89,11 @@ use crate::scene::bvh::{Hit, Ray};
 
 /// Fixed-point iterations of the light-guided direction through the refractive boundary.
 pub const GUIDE_ITERATIONS: usize = 3;
-/// Guide cone half-angle as a multiple of the emitter's apparent angular radius.
-pub const CONE_MARGIN: f64 = 2.0;
+/// Guide cone half-angle as a multiple of the emitter's apparent angular radius. A curved boundary
+/// magnifies the emitter seen from inside, and what the cone misses only the HG continuation finds
+/// (fireflies): on the bundled sphere at 2 × 1024 paths the variance of the mean was, for margins 2 / 4 / 8,
+/// Wax 5.1e-2 / 2.0e-2 / 2.6e-2 and Skin 4.7e-3 / 2.2e-3 / 6.4e-3 (normalised; Oil 4.6e-2 for 2 and 4).
+pub const CONE_MARGIN: f64 = 4.0;
 /// Smallest guide cone half-angle \[rad\].
 pub const CONE_MIN: f64 = 0.01;
 /// Largest guide cone half-angle \[rad\].
