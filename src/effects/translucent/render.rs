@@ -630,6 +630,14 @@ pub fn multiple_needed(albedo: f64) -> bool {
     albedo > 0.0 && (albedo >= 1.0 || albedo * albedo / (1.0 - albedo) >= MULTIPLE_SHARE_FLOOR)
 }
 
+/// Whether the inner irradiance of a channel with albedo `albedo` is evaluated: the boundary re-emits
+/// it into the object, where it shows only after one more scattering, so it carries at most
+/// `Σ_{k≥2} α^k / α = α/(1 − α)` of the channel's single scattering; below [`MULTIPLE_SHARE_FLOOR`]
+/// it is left out (oil's red channel, α = 0.0042: 4.2e-3).
+pub fn inner_needed(albedo: f64) -> bool {
+    albedo > 0.0 && (albedo >= 1.0 || albedo / (1.0 - albedo) >= MULTIPLE_SHARE_FLOOR)
+}
+
 /// Diffusion's extrapolation distance of an index-matched boundary, `z_b = 2D` per channel with
 /// `D = 1/(3σ_t')` and the reduced extinction `σ_t' = σ_t (1 − α g)` (the partial-current boundary
 /// condition with `A = 1`: the internal reflections are not folded into `A` because the surface
@@ -816,7 +824,7 @@ impl<'a> Evaluator<'a> {
             let a = self.entry(e);
             let (_, start, end, dir) = a.points();
             for (c, o) in out.iter_mut().enumerate() {
-                if self.ch[c].albedo <= 0.0 {
+                if !inner_needed(self.ch[c].albedo) {
                     continue;
                 }
                 let st = self.sigma(c);
@@ -1671,5 +1679,10 @@ mod tests {
         // The floor's crossing: α² = 0.02 (1 − α) at α = (−0.02 + √(0.0004 + 0.08))/2.
         let a = (-0.02 + (0.0004f64 + 0.08).sqrt()) / 2.0;
         assert!(multiple_needed(a + 1e-9) && !multiple_needed(a - 1e-9));
+        // The inner irradiance drops only oil's red; its crossing α = 0.02 (1 − α) at α = 0.02/1.02.
+        assert_eq!([0.0042, 0.4535, 0.0995].map(inner_needed), [false, true, true]);
+        assert!(inner_needed(1.0) && !inner_needed(0.0));
+        let a = 0.02 / 1.02;
+        assert!(inner_needed(a + 1e-9) && !inner_needed(a - 1e-9));
     }
 }
