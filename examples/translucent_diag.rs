@@ -129,6 +129,16 @@ fn main() {
     let noise = |a: &Img, b: &Img| mse(a, b) / 4.0;
     let t = Instant::now();
     let prep = render::prepare(&setup, &table, &popts, &ropts).unwrap();
+    let st = prep.points.stats;
+    println!(
+        "pre-processing: surface {:.0} ms, light rays {:.0} ms, photons {:.0} ms, indirect {:.0} ms, the rest (trees, inner irradiance, emission) {:.0} ms; {} volume samples",
+        st.surface_ms,
+        st.volume_ms,
+        st.photon_ms,
+        st.indirect_ms,
+        prep.preprocess_ms - st.surface_ms - st.volume_ms - st.photon_ms - st.indirect_ms,
+        prep.points.volume.len()
+    );
     let frame = render::render(&setup, &table, &prep, &cam, &ropts, &|_| {}).unwrap();
     let ms = t.elapsed().as_secs_f64() * 1e3;
     let mb: Img =

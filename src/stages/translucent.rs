@@ -85,8 +85,9 @@ crate::declare_params! {
         epsilon1: f64 = 0.1, unit = "sr", range = "> 0, ≥ epsilon2";
         /// Algorithm 1: solid angle above which a node is subdivided where the phase function is large.
         epsilon2: f64 = 0.01, unit = "sr", range = "> 0, ≤ epsilon1";
-        /// Solid angle above which a node is subdivided in the cuts for multiple and bounced scattering.
-        epsilon_multiple: f64 = 0.5, unit = "sr", range = "> 0 and ≤ 4π";
+        /// Solid angle above which a node is subdivided in the cuts for multiple and bounced scattering and the
+        /// inner irradiance (1 sr: against 0.5 sr, 30 % less time and the same or lower MSE for Wax, Oil, Skin).
+        epsilon_multiple: f64 = 1.0, unit = "sr", range = "> 0 and ≤ 4π";
         /// Single-scattering boxes are this many light-tube widths wide (density factor k_v = widen²).
         widen: f64 = 2.0, unit = "", range = "0.25 to 16";
         /// Clamp of the 1/r² of Eq. 6 and 8.

@@ -132,7 +132,7 @@ impl Default for RenderOptions {
             light_samples: 4,
             camera_bounces: 1,
             epsilon1: 0.1,
-            epsilon_multiple: 0.5,
+            epsilon_multiple: 1.0,
             epsilon2: 0.01,
             phase_threshold: FRAC_PI_4,
             widen: 2.0,
