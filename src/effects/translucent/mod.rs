@@ -15,6 +15,8 @@
 //!   grid of anchor pixels.
 //! - [`surface_light`] (Sec. 3.5.5): the diffuse light the boundary sends into the object, with every
 //!   internal reflection.
+//! - [`object_light`] (beyond the paper): the caustic and glow the object throws on the opaque
+//!   surfaces around it, as photon maps from the light rays that leave it.
 //! - [`compare`]: MSE against the reference (normalisation stated there), error against run time.
 //! - [`mod@reference`]: an independent volumetric path tracer for dielectric-bounded homogeneous media,
 //!   split by the number of scattering events in the medium.

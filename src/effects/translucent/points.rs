@@ -41,10 +41,9 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::object_light::{CAUSTIC_K, GLOW_K, ObjectLight, Photon, PhotonMap, glow_photon, land};
+use super::object_light::{CAUSTIC_K, GLOW_K, ObjectLight, Photon, PhotonMap, glow_photon, land, receives};
 use super::{Emitter, Setup, fresnel, reflect, refract};
 use crate::physics::rng::StreamKey;
-use crate::scene::Surface;
 use crate::scene::bvh::{Hit, Ray};
 
 /// Options of [`generate`].
@@ -804,20 +803,10 @@ fn indirect_irradiance(
         let (r, phi) = (u1.sqrt(), 2.0 * PI * u2);
         let d = t1 * (r * phi.cos()) + t2 * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt();
         let Some(h) = setup.bvh.closest_hit(&Ray::new(o.to_array(), d.to_array())) else { continue };
-        if h.mesh == setup.object {
+        if !receives(setup, h.mesh) {
             continue;
         }
-        let opaque = setup
-            .scene
-            .meshes
-            .get(h.mesh)
-            .and_then(|m| m.material)
-            .and_then(|mi| setup.scene.materials.get(mi))
-            .is_some_and(|m| matches!(m.surface, Surface::Opaque));
         let rho = setup.albedo_of(h.mesh);
-        if !opaque || max3(rho) <= 0.0 {
-            continue;
-        }
         let mut nh = DVec3::from_array(h.geometric_normal);
         if nh.dot(d) > 0.0 {
             nh = -nh;
@@ -849,7 +838,7 @@ mod tests {
     use super::*;
     use crate::effects::translucent::Material;
     use crate::scene::bvh::{SceneBvh, procedural};
-    use crate::scene::{Material as SceneMaterial, Mesh, Scene};
+    use crate::scene::{Material as SceneMaterial, Mesh, Scene, Surface};
 
     fn mat(sigma: [f64; 3], ior: f64) -> Material {
         Material { sigma_t: sigma, albedo: [0.9; 3], g: 0.0, ior }
