@@ -150,6 +150,8 @@ pub struct TranslucentSummary {
 
 /// Paths per pixel of the bench's longer reference.
 const BENCH_LONG_REFERENCE: u32 = 4096;
+/// Width of the bench's frame-time table (wang2018 Table 3 renders 512 × 512).
+const BENCH_TABLE3_WIDTH: usize = 512;
 
 impl TranslucentRender {
     fn fields(&self) -> view::ViewFields<'_> {
@@ -624,8 +626,8 @@ impl TranslucentRender {
         Ok(md)
     }
 
-    /// `voltab bench --translucent`: per material, the paper's Table 3 columns at the stage's size
-    /// (pre-processing, single, double + multiple, bounced, rest), memory, the naive traversal against
+    /// `voltab bench --translucent`: per material, the paper's Table 3 columns at the stage's size and
+    /// at 512 × 512 (pre-processing, single, double + multiple, bounced, rest), memory, the naive traversal against
     /// the two-step one, and the speed-up over path tracing at equal MSE at `reference_width` against
     /// the stage's reference and against a 4096-path one.
     pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<BenchRow>), StageError> {
@@ -641,6 +643,16 @@ impl TranslucentRender {
         );
         let mut rows = Vec::new();
         let stage = TranslucentRender { reference_samples: self.reference_samples.max(64), ..self.clone() };
+        // wang2018 Table 3's frame size, at the stage's aspect ratio.
+        let big = (
+            BENCH_TABLE3_WIDTH,
+            ((BENCH_TABLE3_WIDTH as f64) * cam.height as f64 / cam.width as f64).round().max(1.0) as usize,
+        );
+        let cam_big = fields.camera(id, &loaded.scene, &fields.scene_path(ctx.base_dir), Some(big))?;
+        let mut text_big = format!(
+            "\n{id}: the same at {}×{} (wang2018 Table 3's size)\n\n| material | pre-proc ms | single ms | double+multiple ms | bounced ms | rest ms | total ms | memory MB |\n|---|---:|---:|---:|---:|---:|---:|---:|\n",
+            big.0, big.1
+        );
         for name in &self.materials {
             let material = loaded.material(id, name, self.mfp_scale)?;
             let setup = loaded.setup(material);
@@ -660,6 +672,18 @@ impl TranslucentRender {
                 total,
                 prep.memory_bytes as f64 / 1e6,
                 frame_naive.times.single_ms
+            ));
+            let (frame_big, prep_big) = self.render_frame(&setup, &table, &cam_big, false).map_err(fail)?;
+            let tb = frame_big.times;
+            text_big.push_str(&format!(
+                "| {name} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} |\n",
+                prep_big.preprocess_ms,
+                tb.single_ms,
+                tb.double_multiple_ms,
+                tb.bounced_ms,
+                tb.rest_ms,
+                prep_big.preprocess_ms + tb.single_ms + tb.double_multiple_ms + tb.bounced_ms + tb.rest_ms,
+                prep_big.memory_bytes as f64 / 1e6,
             ));
             rows.push(BenchRow {
                 what: format!("{id} {name}: single scattering, naive vs two-step traversal"),
@@ -695,6 +719,7 @@ impl TranslucentRender {
                 });
             }
         }
+        text.push_str(&text_big);
         Ok((text, rows))
     }
 }
