@@ -153,6 +153,23 @@ const BENCH_LONG_REFERENCE: u32 = 4096;
 /// Width of the bench's frame-time table (wang2018 Table 3 renders 512 × 512).
 const BENCH_TABLE3_WIDTH: usize = 512;
 
+/// The bench table's cells of one frame (wang2018 Table 3 columns): pre-processing, single,
+/// double + multiple, bounced, rest and total ms, memory MB.
+fn table3_cells(frame: &render::Frame, prep: &render::Prepared) -> String {
+    let t = frame.times;
+    let total = prep.preprocess_ms + t.single_ms + t.double_multiple_ms + t.bounced_ms + t.rest_ms;
+    format!(
+        "{:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1}",
+        prep.preprocess_ms,
+        t.single_ms,
+        t.double_multiple_ms,
+        t.bounced_ms,
+        t.rest_ms,
+        total,
+        prep.memory_bytes as f64 / 1e6
+    )
+}
+
 impl TranslucentRender {
     fn fields(&self) -> view::ViewFields<'_> {
         view::ViewFields {
@@ -661,30 +678,13 @@ impl TranslucentRender {
             let naive = TranslucentRender { two_step: false, ..self.clone() };
             let (frame_naive, _) = naive.render_frame(&setup, &table, &cam, false).map_err(fail)?;
             let t = frame.times;
-            let total = prep.preprocess_ms + t.single_ms + t.double_multiple_ms + t.bounced_ms + t.rest_ms;
             text.push_str(&format!(
-                "| {name} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} | {:.0} |\n",
-                prep.preprocess_ms,
-                t.single_ms,
-                t.double_multiple_ms,
-                t.bounced_ms,
-                t.rest_ms,
-                total,
-                prep.memory_bytes as f64 / 1e6,
+                "| {name} | {} | {:.0} |\n",
+                table3_cells(&frame, &prep),
                 frame_naive.times.single_ms
             ));
             let (frame_big, prep_big) = self.render_frame(&setup, &table, &cam_big, false).map_err(fail)?;
-            let tb = frame_big.times;
-            text_big.push_str(&format!(
-                "| {name} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} |\n",
-                prep_big.preprocess_ms,
-                tb.single_ms,
-                tb.double_multiple_ms,
-                tb.bounced_ms,
-                tb.rest_ms,
-                prep_big.preprocess_ms + tb.single_ms + tb.double_multiple_ms + tb.bounced_ms + tb.rest_ms,
-                prep_big.memory_bytes as f64 / 1e6,
-            ));
+            text_big.push_str(&format!("| {name} | {} |\n", table3_cells(&frame_big, &prep_big)));
             rows.push(BenchRow {
                 what: format!("{id} {name}: single scattering, naive vs two-step traversal"),
                 baseline_ms: frame_naive.times.single_ms,

@@ -627,7 +627,13 @@ pub const MULTIPLE_SHARE_FLOOR: f64 = 0.02;
 /// Whether multiple scattering of a channel with albedo `albedo` is evaluated
 /// ([`MULTIPLE_SHARE_FLOOR`]).
 pub fn multiple_needed(albedo: f64) -> bool {
-    albedo > 0.0 && (albedo >= 1.0 || albedo * albedo / (1.0 - albedo) >= MULTIPLE_SHARE_FLOOR)
+    above_floor(albedo, |a| a * a / (1.0 - a))
+}
+
+/// A channel of albedo `albedo` is kept when it scatters at all and `share(albedo)` (its share of the
+/// channel's single scattering, for α < 1) reaches [`MULTIPLE_SHARE_FLOOR`]; α = 1 always is.
+fn above_floor(albedo: f64, share: impl Fn(f64) -> f64) -> bool {
+    albedo > 0.0 && (albedo >= 1.0 || share(albedo) >= MULTIPLE_SHARE_FLOOR)
 }
 
 /// Whether the inner irradiance of a channel with albedo `albedo` is evaluated: the boundary re-emits
@@ -635,7 +641,7 @@ pub fn multiple_needed(albedo: f64) -> bool {
 /// `Σ_{k≥2} α^k / α = α/(1 − α)` of the channel's single scattering; below [`MULTIPLE_SHARE_FLOOR`]
 /// it is left out (oil's red channel, α = 0.0042: 4.2e-3).
 pub fn inner_needed(albedo: f64) -> bool {
-    albedo > 0.0 && (albedo >= 1.0 || albedo / (1.0 - albedo) >= MULTIPLE_SHARE_FLOOR)
+    above_floor(albedo, |a| a / (1.0 - a))
 }
 
 /// Diffusion's extrapolation distance of an index-matched boundary, `z_b = 2D` per channel with
