@@ -444,7 +444,7 @@ mod tests {
                     if h.mesh != setup.object {
                         if !inside && entered && h.mesh == 1 {
                             let p = x + d * h.t;
-                            (all[c]) += w * flux;
+                            all[c] += w * flux;
                             if (p - centre).length() < radius {
                                 near[c] += w * flux;
                             }
