@@ -708,7 +708,14 @@ impl Plan {
                     }
                 }
                 StageDef::TranslucentRender(t) => {
-                    effect_stage(s, "translucent media", &t.scene, p, scenes, |sc| translucent_lacks(sc, t))
+                    let mut plan =
+                        effect_stage(s, "translucent media", &t.scene, p, scenes, |sc| translucent_lacks(sc, t));
+                    // A lobe table the plan skips brackets none of the stage's materials, so holds none of
+                    // them: the stage reads `table` for those and must not open a file this run did not write.
+                    if let Some(StageDef::TranslucentRender(d)) = &mut plan.def {
+                        d.lobe_tables.retain(|l| tables.iter().any(|tp| tp.id == *l && tp.def.is_some()));
+                    }
+                    plan
                 }
                 StageDef::PopRender(r) if !tables.iter().any(|tp| tp.id == r.table && tp.def.is_some()) => StagePlan {
                     id: s.id().to_string(),

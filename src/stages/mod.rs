@@ -172,7 +172,10 @@ impl StageDef {
                 .into_iter()
                 .collect(),
             StageDef::TranslucentRender(t) => {
-                vec![("table", t.table.clone(), crate::tables::ms_lobes::MsLobesRaw::KIND)]
+                let kind = crate::tables::ms_lobes::MsLobesRaw::KIND;
+                let mut v = vec![("table", t.table.clone(), kind)];
+                v.extend(t.lobe_tables.iter().map(|l| ("lobe_tables", l.clone(), kind)));
+                v
             }
             StageDef::PopRender(p) => {
                 vec![("table", p.table.clone(), crate::tables::pop_preset::PopPresetRaw::KIND)]

@@ -4,7 +4,9 @@
 //!
 //! **Input.** A scene file (relative to the pipeline file) with a closed dielectric mesh bounding a
 //! medium, point or sphere lights and a perspective camera; the id of a compiled `MsLobes` table whose
-//! slices cover the materials (the planner keeps exactly those). **Phases.** Import → BVH → per
+//! slices cover the materials (the planner keeps exactly those), and optionally `lobe_tables` tried
+//! first: a material reads the first of them that holds its g and channel albedos as nodes (e.g. a
+//! φ-resolved table for the strongly forward-scattering materials only; [`LobeTables`]). **Phases.** Import → BVH → per
 //! material: light samples, trees and inner irradiance ([`render::prepare`]) → the frame
 //! ([`render::render`]) → `<out>/<stage>/<material>.exr` (RGB = the full image; layers `single`,
 //! `double`, `multiple`, `bounced`, `rest`), a PNG preview of the image and of each component
@@ -47,6 +49,10 @@ crate::declare_params! {
         scene: String = String::new(), unit = "", range = "path to a scene file with a closed dielectric mesh bounding a medium";
         /// Id of the `MsLobes` table (its slices must cover the materials' albedos and g).
         table: String = String::new(), unit = "", range = "id of an MsLobes table in this pipeline";
+        /// Further `MsLobes` tables tried before `table`, in order: a material reads the first that holds its g
+        /// as a slice and its three channel albedos as nodes (e.g. a φ-resolved table for the strongly
+        /// forward-scattering materials only); every other material reads `table`.
+        lobe_tables: Vec<String> = Vec::new(), unit = "", range = "0 to 8 ids of MsLobes tables in this pipeline, each once, none equal to table";
         /// Index of the scene camera to render.
         camera: u32 = 0, unit = "", range = "0 to the scene's camera count - 1";
         /// Image width.
@@ -115,6 +121,8 @@ crate::declare_params! {
 pub struct MaterialSummary {
     /// Material name.
     pub material: String,
+    /// Id of the `MsLobes` table it read (`lobe_tables` or `table`).
+    pub table: String,
     /// σ_t per channel \[1/m\].
     pub sigma_t: [f64; 3],
     /// Albedo per channel.
@@ -195,6 +203,22 @@ impl TranslucentRender {
         };
         if self.table.is_empty() {
             issue("table", "table is empty".into(), "give the id of an MsLobes table, e.g. table: \"ms_lobes_table2\"");
+        }
+        if self.lobe_tables.len() > MAX_LOBE_TABLES {
+            issue(
+                "lobe_tables",
+                format!("{} lobe tables", self.lobe_tables.len()),
+                &format!("list at most {MAX_LOBE_TABLES} tables"),
+            );
+        }
+        for (i, t) in self.lobe_tables.iter().enumerate() {
+            if *t == self.table || self.lobe_tables[..i].contains(t) {
+                issue(
+                    "lobe_tables",
+                    format!("table \"{t}\" is listed twice (lobe_tables and table included)"),
+                    "list each table once; `table` is always tried last",
+                );
+            }
         }
         if self.materials.is_empty() || self.materials.len() > 16 {
             issue("materials", format!("{} materials", self.materials.len()), "give 1 to 16 material names");
@@ -277,15 +301,16 @@ impl TranslucentRender {
         }
     }
 
-    /// The (albedo, g) pairs the materials need from the table (`scene` gives `Scene`'s medium).
-    pub fn table_needs(&self, scene: Option<&Scene>) -> Vec<(f64, f64)> {
+    /// Each material's (channel albedos, g) as the lobe tables see it (`scene` gives `Scene`'s medium;
+    /// a `Scene` material without one is left out).
+    fn material_media(&self, scene: Option<&Scene>) -> Vec<([f64; 3], f64)> {
         let mut out = Vec::new();
         for name in &self.materials {
             if let Some(m) = crate::tables::ms_lobes::material(name) {
-                out.extend(m.albedo.iter().map(|&a| (a, m.g)));
+                out.push((m.albedo, m.g));
             } else if let Some(med) = scene.and_then(|s| scene_medium(s, 1.0)) {
                 // The index of refraction does not enter the table: any value does here.
-                out.extend((0..3).map(|c| (med.albedo[c], med.g)));
+                out.push((med.albedo, med.g));
             }
         }
         out
@@ -297,17 +322,18 @@ impl TranslucentRender {
         let dir = fields.out_dir(id, ctx)?;
         let loaded = self.load(id, ctx)?;
         let cam = fields.camera(id, &loaded.scene, &fields.scene_path(ctx.base_dir), None)?;
-        let table = self.open_table(id, ctx, &loaded.scene)?;
+        let tables = self.open_tables(id, ctx, &loaded.scene)?;
         let mut outputs = Vec::new();
         let mut summaries = Vec::new();
         for name in &self.materials {
             let material = loaded.material(id, name, self.mfp_scale)?;
+            let (table_id, table) = tables.for_material(&material);
             let setup = loaded.setup(material);
             let fail = material_error(id, name);
-            let (frame, prep) = self.render_frame(&setup, &table, &cam, ctx.progress).map_err(fail)?;
+            let (frame, prep) = self.render_frame(&setup, table, &cam, ctx.progress).map_err(fail)?;
             outputs.extend(write_frame(id, &dir, name, &frame)?);
             let comparison = if self.reference_samples > 0 {
-                let (c, files) = self.compare(id, &dir, name, &setup, &table, &cam)?;
+                let (c, files) = self.compare(id, &dir, name, &setup, table, &cam)?;
                 outputs.extend(files);
                 Some(c)
             } else {
@@ -316,6 +342,7 @@ impl TranslucentRender {
             let t = frame.times;
             summaries.push(MaterialSummary {
                 material: name.clone(),
+                table: table_id.to_string(),
                 sigma_t: material.sigma_t,
                 albedo: material.albedo,
                 g: material.g,
@@ -431,14 +458,53 @@ impl TranslucentRender {
         Ok(Loaded { scene, bvh, object, ior, emitters, skipped })
     }
 
-    fn open_table(&self, id: &str, ctx: &StageContext, scene: &Scene) -> Result<MsLobesTable, StageError> {
-        let path = ctx.out_dir.join(format!("{}.vtab", self.table));
-        let needs = self.table_needs(Some(scene));
-        MsLobesTable::open(&path, Some(&needs)).map_err(|e| StageError::Table {
-            stage: id.into(),
-            path,
-            message: format!("{e} (the materials need (albedo, g) = {needs:?})"),
-        })
+    /// `lobe_tables` in order, then `table`, each loaded with the slices of the materials that read it
+    /// (a lobe table that holds none of them is not kept).
+    fn open_tables(&self, id: &str, ctx: &StageContext, scene: &Scene) -> Result<LobeTables, StageError> {
+        let open = |table: &str, needs: &[(f64, f64)]| {
+            let path = ctx.out_dir.join(format!("{table}.vtab"));
+            MsLobesTable::open(&path, Some(needs)).map_err(|e| StageError::Table {
+                stage: id.into(),
+                path,
+                message: format!("{e} (the materials need (albedo, g) = {needs:?})"),
+            })
+        };
+        let pairs = |media: &[([f64; 3], f64)]| -> Vec<(f64, f64)> {
+            media.iter().flat_map(|(a, g)| a.map(|x| (x, *g))).collect()
+        };
+        let mut left = self.material_media(Some(scene));
+        let mut tables = Vec::new();
+        for t in &self.lobe_tables {
+            // The layout alone (no slices) says which materials the table holds.
+            let layout = open(t, &[])?;
+            let held: Vec<([f64; 3], f64)> = left.iter().filter(|(a, g)| layout.holds(a, *g)).copied().collect();
+            if held.is_empty() {
+                continue;
+            }
+            left.retain(|(a, g)| !layout.holds(a, *g));
+            tables.push((t.clone(), open(t, &pairs(&held))?));
+        }
+        tables.push((self.table.clone(), open(&self.table, &pairs(&left))?));
+        Ok(LobeTables { tables })
+    }
+}
+
+/// Most `lobe_tables` of a stage.
+const MAX_LOBE_TABLES: usize = 8;
+
+/// A stage's lobe tables with their ids: `lobe_tables` that hold one of its materials, in order, then
+/// `table`.
+pub struct LobeTables {
+    tables: Vec<(String, MsLobesTable)>,
+}
+
+impl LobeTables {
+    /// The table `m` reads and its id: the first that holds its g and channel albedos exactly, else the
+    /// stage's `table` (the last).
+    pub fn for_material(&self, m: &Material) -> (&str, &MsLobesTable) {
+        let last = self.tables.len() - 1;
+        let (id, t) = self.tables[..last].iter().find(|(_, t)| t.holds(&m.albedo, m.g)).unwrap_or(&self.tables[last]);
+        (id, t)
     }
 }
 
@@ -548,7 +614,7 @@ impl TranslucentRender {
         let w = self.reference_width as usize;
         let h = ((w as f64) * cam.height as f64 / cam.width as f64).round().max(1.0) as usize;
         let small = ViewCamera { width: w, height: h, ..cam };
-        let table = self.open_table(id, ctx, &loaded.scene)?;
+        let tables = self.open_tables(id, ctx, &loaded.scene)?;
         let converged = self.reference_samples.max(256) * 4;
         let ladder = [
             Quality { surface_samples: 1024, k_max: 4, epsilon1: 0.4 },
@@ -561,6 +627,7 @@ impl TranslucentRender {
         );
         for name in &self.materials {
             let material = loaded.material(id, name, self.mfp_scale)?;
+            let (_, table) = tables.for_material(&material);
             let setup = loaded.setup(material);
             let fail = material_error(id, name);
             let truth = reference::render(
@@ -595,7 +662,7 @@ impl TranslucentRender {
                     ..self.clone()
                 };
                 let t0 = Instant::now();
-                let (frame, _) = stage.render_frame(&setup, &table, &small, false).map_err(fail)?;
+                let (frame, _) = stage.render_frame(&setup, table, &small, false).map_err(fail)?;
                 let t = ms(t0);
                 let label = format!("{} samples, k {}, ε1 {}", q.surface_samples, q.k_max, q.epsilon1);
                 pts.push((label, t, err(&frame.total())));
@@ -651,7 +718,7 @@ impl TranslucentRender {
         let loaded = self.load(id, ctx)?;
         let fields = self.fields();
         let cam = fields.camera(id, &loaded.scene, &fields.scene_path(ctx.base_dir), None)?;
-        let table = self.open_table(id, ctx, &loaded.scene)?;
+        let tables = self.open_tables(id, ctx, &loaded.scene)?;
         let mut text = format!(
             "{id}: wang2018 point-based rendering at {}×{} ({} threads)\n\n| material | pre-proc ms | single ms | double+multiple ms | bounced ms | rest ms | total ms | memory MB | single naive ms |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
             cam.width,
@@ -672,18 +739,19 @@ impl TranslucentRender {
         );
         for name in &self.materials {
             let material = loaded.material(id, name, self.mfp_scale)?;
+            let (_, table) = tables.for_material(&material);
             let setup = loaded.setup(material);
             let fail = material_error(id, name);
-            let (frame, prep) = self.render_frame(&setup, &table, &cam, false).map_err(fail)?;
+            let (frame, prep) = self.render_frame(&setup, table, &cam, false).map_err(fail)?;
             let naive = TranslucentRender { two_step: false, ..self.clone() };
-            let (frame_naive, _) = naive.render_frame(&setup, &table, &cam, false).map_err(fail)?;
+            let (frame_naive, _) = naive.render_frame(&setup, table, &cam, false).map_err(fail)?;
             let t = frame.times;
             text.push_str(&format!(
                 "| {name} | {} | {:.0} |\n",
                 table3_cells(&frame, &prep),
                 frame_naive.times.single_ms
             ));
-            let (frame_big, prep_big) = self.render_frame(&setup, &table, &cam_big, false).map_err(fail)?;
+            let (frame_big, prep_big) = self.render_frame(&setup, table, &cam_big, false).map_err(fail)?;
             text_big.push_str(&format!("| {name} | {} |\n", table3_cells(&frame_big, &prep_big)));
             rows.push(BenchRow {
                 what: format!("{id} {name}: single scattering, naive vs two-step traversal"),
@@ -702,7 +770,7 @@ impl TranslucentRender {
             }
             for samples in counts {
                 let long = TranslucentRender { reference_samples: samples, ..stage.clone() };
-                let (c, _) = long.compare(id, &dir, &format!("bench_{name}_{samples}"), &setup, &table, &cam)?;
+                let (c, _) = long.compare(id, &dir, &format!("bench_{name}_{samples}"), &setup, table, &cam)?;
                 rows.push(BenchRow {
                     what: format!("{id} {name}: path tracing vs point-based at equal MSE ({samples}-path reference)"),
                     baseline_ms: c.equal_mse_reference_ms,

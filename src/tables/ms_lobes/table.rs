@@ -284,6 +284,13 @@ impl MsLobesTable {
         &self.albedos
     }
 
+    /// Whether `g` is a g slice and every channel albedo an albedo node (to the definition's merge
+    /// tolerance, 1e-12): a medium this table looks up without interpolating.
+    pub fn holds(&self, albedo: &[f64], g: f64) -> bool {
+        let node = |nodes: &[f64], x: f64| nodes.iter().any(|&v| (v - x).abs() <= 1e-12);
+        node(&self.gs, g) && albedo.iter().all(|&a| node(&self.albedos, a))
+    }
+
     /// Fraction of the order-`k` collisions inside the grid for g slice `gi` (`k ≥ 1`).
     pub fn inside_fraction(&self, gi: usize, k: usize) -> Option<f64> {
         self.inside.get(gi)?.get(k.checked_sub(1)?).copied()
