@@ -22,14 +22,7 @@ fn pipeline(materials: &str, extra: &str) -> String {
 #[test]
 fn translucent_stage_renders_components_and_compares_with_path_tracing() {
     let d = tempdir();
-    let p = write(d.path(), "tr.ron", &pipeline("[\"Wax\", \"Oil\"]", ""));
-    let out = d.path().join("out");
-    let scene = root().join("scenes/translucent.gltf");
-    let o = voltab()
-        .args(["run", p.to_str().unwrap(), "--out", out.to_str().unwrap(), "--scene", scene.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", text(&o));
+    let (out, s) = run_and_read(d.path(), "out", &pipeline("[\"Wax\", \"Oil\"]", ""));
     let dir = out.join("tr");
     for name in ["Wax", "Oil"] {
         let exr = voltab::image_io::read_exr_rgb(&dir.join(format!("{name}.exr"))).unwrap();
@@ -52,7 +45,6 @@ fn translucent_stage_renders_components_and_compares_with_path_tracing() {
             assert!(dir.join(format!("{name}_{layer}.png")).exists());
         }
     }
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
     let m = s["materials"].as_array().unwrap();
     assert_eq!(m.len(), 2);
     for e in m {
@@ -107,6 +99,8 @@ fn two_table_pipeline(stage: &str) -> String {
     )
 }
 
+/// Runs pipeline `src` (written as `<name>.ron`) on the bundled scene into `<dir>/<name>`: that folder
+/// and stage `tr`'s summary.
 fn run_and_read(dir: &std::path::Path, name: &str, src: &str) -> (std::path::PathBuf, serde_json::Value) {
     let p = write(dir, &format!("{name}.ron"), src);
     let out = dir.join(name);
