@@ -204,7 +204,7 @@ fn the_bundled_pipelines_validate() {
     let v = load_and_validate(&common::root().join("pipelines/default.ron"), &Disk).unwrap();
     assert_eq!(v.tables().len(), 7);
     assert_eq!(phase(&v, "hg_dubouchet").zh_order, 16, "override from default.ron applies to the included table");
-    assert_eq!(v.stages().len(), 9);
+    assert_eq!(v.stages().len(), 8);
 }
 
 #[test]
