@@ -50,7 +50,7 @@
 //!    *Scene rays* (beyond wang2018, on by default): the first scattering of the scene's light refracted
 //!    in is taken by `scene_rays` phase-sampled rays per camera sample instead of from the surface
 //!    samples' diffuse emission — traced back to the boundary, out through it and to the lit surface
-//!    behind ([`Tracer::scene_first`]). The diffuse model spreads the light that enters at a facet over
+//!    behind (`Tracer::scene_first`). The diffuse model spreads the light that enters at a facet over
 //!    the whole inner hemisphere; a forward-scattering medium shows instead what lies behind it along
 //!    the view (Oil, g = 0.9: the top of the ball was half as bright as path tracing). The surface
 //!    samples keep the internally reflected light's first scattering and every later order.
