@@ -122,9 +122,13 @@ crate::declare_params! {
     }
 }
 
+/// Two g or albedo values this close are one node (merged in the definition, matched by
+/// [`MsLobesTable::holds`]).
+pub const NODE_TOLERANCE: f64 = 1e-12;
+
 fn sorted_union(mut v: Vec<f64>) -> Vec<f64> {
     v.sort_by(f64::total_cmp);
-    v.dedup_by(|a, b| (*a - *b).abs() <= 1e-12);
+    v.dedup_by(|a, b| (*a - *b).abs() <= NODE_TOLERANCE);
     v
 }
 

@@ -285,9 +285,9 @@ impl MsLobesTable {
     }
 
     /// Whether `g` is a g slice and every channel albedo an albedo node (to the definition's merge
-    /// tolerance, 1e-12): a medium this table looks up without interpolating.
+    /// tolerance, [`super::NODE_TOLERANCE`]): a medium this table looks up without interpolating.
     pub fn holds(&self, albedo: &[f64], g: f64) -> bool {
-        let node = |nodes: &[f64], x: f64| nodes.iter().any(|&v| (v - x).abs() <= 1e-12);
+        let node = |nodes: &[f64], x: f64| nodes.iter().any(|&v| (v - x).abs() <= super::NODE_TOLERANCE);
         node(&self.gs, g) && albedo.iter().all(|&a| node(&self.albedos, a))
     }
 
