@@ -59,7 +59,8 @@
 //! the tests (it vanishes as the samples get denser and the clamp smaller).
 //!
 //! **Determinism.** Only the diffuse rays and the scene rays draw random numbers, from counter-based
-//! streams keyed by the pixel (diffuse rays) or by the segment and camera sample (scene rays); segment results are summed into pixels in segment order, so frames are bit-identical for any
+//! streams keyed by the pixel (diffuse rays) or by the segment and camera sample (scene rays);
+//! segment results are summed into pixels in segment order, so frames are bit-identical for any
 //! thread count.
 
 use std::f64::consts::{FRAC_PI_4, PI};
