@@ -8,9 +8,9 @@
 //! first: a material reads the first of them that holds its g and channel albedos as nodes (e.g. a
 //! φ-resolved table for the strongly forward-scattering materials only; [`LobeTables`]).
 //! **Phases.** Import → BVH → per material: light samples, trees and inner irradiance
-//! ([`render::prepare`]) → the frame ([`render::render`]) → `<out>/<stage>/<material>.exr` (RGB = the full image; layers `single`,
-//! `double`, `multiple`, `bounced`, `rest`), a PNG preview of the image and of each component
-//! (wang2018 Fig. 12), and `summary.json`.
+//! ([`render::prepare`]) → the frame ([`render::render`]) → `<out>/<stage>/<material>.exr` (RGB =
+//! the full image; layers `single`, `double`, `multiple`, `bounced`, `rest`), a PNG preview of the
+//! image and of each component (wang2018 Fig. 12), and `summary.json`.
 //!
 //! **Materials.** Names from wang2018 Table 2 (`voltab materials`), their mean free paths times
 //! `mfp_scale` metres, the object's index of refraction from the scene; `Scene` renders the scene's
