@@ -71,6 +71,7 @@ fn main() {
             "stride" => ropts.smooth_stride = v.parse().unwrap(),
             "drays" => ropts.diffuse_rays = v.parse().unwrap(),
             "srays" => ropts.scene_rays = v.parse().unwrap(),
+            "graze" => ropts.grazing_beams = v.parse().unwrap(),
             "olight" => popts.object_light = v == "1",
             "ior" | "black" | "dump" | "table" => {}
             _ => panic!("unknown {k}"),

@@ -8,8 +8,9 @@ fn every_formula_survives_extreme_inputs() {
     // PhaseHg: 11 g × (5 μ × 2 + 3 + 5 ξ + 4) + 2 whole-table rows. ZhResponse: 3 emitters × (4 media ×
     // 2 g × 5 d × 3 normals + 1 vacuum row) + 1 overflow row. MsLobes: 5 albedos × 4 g × 4 points × 2 θ.
     // ImageFog: 5 density-integral rows + 4 spread rows. Translucent: 5 Fresnel + 4 Eq. 10 weights + 1 oil
-    // weight + 3 boundary rows (index-matched grazing Fresnel, grazing emission profile, z_b) + 2 solid
-    // angles + 5 object-light rows (coincident photons, 3 glow walks, 1 caustic) + 5 scene-ray rows. PopPreset: 6 a × 4 flow rows + 3 N × 3 ordinate rows + 1 validation row + 5 Eq. 10 rows.
+    // weight + 3 boundary rows (index-matched grazing Fresnel, grazing emission profile, z_b) + 2 grazing-beam
+    // medians + 2 solid angles + 5 object-light rows (coincident photons, 3 glow walks, 1 caustic) + 5 scene-ray
+    // rows. PopPreset: 6 a × 4 flow rows + 3 N × 3 ordinate rows + 1 validation row + 5 Eq. 10 rows.
     // PopRadial: 5 shell cases × 2 + 4 centroid/Δr/V + 4 octahedral + 2 ∫ds/r². The matrix must not
     // silently shrink.
     assert_eq!(
@@ -21,7 +22,7 @@ fn every_formula_survives_extreme_inputs() {
             + 5 * 4 * 4 * 2
             + 5
             + 4
-            + 20
+            + 22
             + 6 * 4
             + 3 * 3
             + 1

@@ -83,6 +83,10 @@ crate::declare_params! {
         /// (0: from the surface samples' diffuse emission, wang2018 Eq. 8; 16 against 0: Oil MSE 7.8e-3 →
         /// 3.3e-3, Skin 2.5e-3 → 1.7e-3, Wax unchanged).
         scene_rays: u32 = 16, unit = "rays", range = "0 to 4096";
+        /// Beams per surface sample, spread in azimuth at the median angle of the internally reflected
+        /// light, for its later orders (0: along the inward normal; 4 against 0: Oil MSE 3.3e-3 → 2.5e-3,
+        /// Skin 1.74e-3 → 1.63e-3, Wax 1.67e-3 → 1.42e-3).
+        grazing_beams: u32 = 4, unit = "beams", range = "0 to 64";
         /// Camera samples k_max per segment of a ray reaching the object directly (Eq. 10).
         k_max: u32 = 16, unit = "samples", range = "1 to 4096";
         /// Rays per visible opaque pixel looking for the object's glow (diffuse bounce; 0: none).
@@ -258,6 +262,7 @@ impl TranslucentRender {
             ("camera_bounces", self.camera_bounces, 0, 16),
             ("indirect_rays", self.indirect_rays, 0, 4096),
             ("scene_rays", self.scene_rays, 0, 4096),
+            ("grazing_beams", self.grazing_beams, 0, 64),
             ("k_max", self.k_max, 1, 4096),
             ("diffuse_rays", self.diffuse_rays, 0, 4096),
             ("diffuse_samples", self.diffuse_samples, 1, 4096),
@@ -303,6 +308,7 @@ impl TranslucentRender {
             reflection_terms: self.reflection_terms as usize,
             smooth_stride: self.smooth_stride as usize,
             scene_rays: self.scene_rays,
+            grazing_beams: self.grazing_beams,
             ..RenderOptions::default()
         }
     }

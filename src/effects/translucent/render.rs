@@ -129,6 +129,11 @@ pub struct RenderOptions {
     /// (the scene seen through the object and scattered once toward the camera); 0 takes it from the
     /// surface samples' emission instead (wang2018 Eq. 8).
     pub scene_rays: u32,
+    /// Beams, spread in azimuth, that carry the later orders of the internally reflected light each
+    /// surface sample sends in, at the median polar angle of its `F(θ) cos θ` profile (grazing: in a
+    /// sphere the light beyond the critical angle never comes nearer the centre than `R/η`); 0 sends
+    /// it along the inward normal with the refracted scene light.
+    pub grazing_beams: u32,
     /// Height above the leaves where the first step stops.
     pub stop_height: u8,
     /// Seed of the diffuse rays.
@@ -155,6 +160,7 @@ impl Default for RenderOptions {
             boundary_image: true,
             smooth_stride: 4,
             scene_rays: 16,
+            grazing_beams: 4,
             stop_height: 3,
             seed: 0,
         }
@@ -175,6 +181,9 @@ impl RenderOptions {
         }
         if self.scene_rays > 4096 {
             return Err(format!("scene_rays = {} must lie in 0..=4096", self.scene_rays));
+        }
+        if self.grazing_beams > 64 {
+            return Err(format!("grazing_beams = {} must lie in 0..=64", self.grazing_beams));
         }
         if self.diffuse_samples == 0 || self.diffuse_samples > 4096 {
             return Err(format!("diffuse_samples = {} must lie in 1..=4096", self.diffuse_samples));
@@ -327,10 +336,17 @@ struct SurfAgg {
     power_ext: [f64; 3],
     /// `Σ S_int A/π`: the internally reflected light (its radiance follows `F(θ)`).
     power_int: [f64; 3],
-    /// Flux `Σ S A` emitted into the object, per channel \[W\] (the beam along the inward normal).
+    /// Flux `Σ S A` emitted into the object along the inward normal, per channel \[W\] (all of it when
+    /// [`RenderOptions::grazing_beams`] is 0, else the refracted scene light's).
     flux0: [f64; 3],
     /// The part of it left unscattered at the chord's end, `Σ S A e^{−σ_t d}`.
     flux1: [f64; 3],
+    /// Flux of the internally reflected light sent along the grazing beams (0 without them).
+    graze0: [f64; 3],
+    /// The part of it left unscattered at the grazing chords' ends.
+    graze1: [f64; 3],
+    /// Power-weighted mean length of the grazing chords.
+    graze_len: f64,
     /// Power-weighted position.
     pos: DVec3,
     /// Power-weighted chord end.
@@ -349,13 +365,61 @@ impl SurfAgg {
                 a.power_int[c] += p.power_int[c];
                 a.flux0[c] += p.flux0[c];
                 a.flux1[c] += p.flux1[c];
+                a.graze0[c] += p.graze0[c];
+                a.graze1[c] += p.graze1[c];
             }
+            a.graze_len += p.graze_len;
             a.pos += p.pos;
             a.end += p.end;
             a.normal += p.normal;
             a.w += p.w;
         }
         a
+    }
+}
+
+/// One surface sample as an emitter into the object (exitance `ex`, chord `d` along the inward
+/// normal): its first-scattering powers split into the refracted scene light and the internal
+/// reflections, the normal beam's flux and, with `graze.0` grazing beams at `cos θ = graze.1`, the
+/// internally reflected flux, what is left of it at the grazing chords' ends and their mean length.
+fn surface_item(setup: &Setup, s: &SurfaceSample, ex: [f64; 3], d: f64, f_out: f64, graze: (u32, f64)) -> SurfAgg {
+    let sigma_t = setup.material.sigma_t;
+    let s_ext: [f64; 3] = std::array::from_fn(|c| ((1.0 - f_out) * s.indirect[c]).min(ex[c]));
+    let s_int: [f64; 3] = std::array::from_fn(|c| (ex[c] - s_ext[c]).max(0.0));
+    let power_ext: [f64; 3] = std::array::from_fn(|c| s_ext[c] / PI * s.area);
+    let power_int: [f64; 3] = std::array::from_fn(|c| s_int[c] / PI * s.area);
+    let normal_share: [f64; 3] = if graze.0 > 0 { s_ext } else { ex };
+    let flux0: [f64; 3] = std::array::from_fn(|c| normal_share[c] * s.area);
+    let flux1: [f64; 3] = std::array::from_fn(|c| flux0[c] * (-sigma_t[c] * d).exp());
+    let end = if d.is_finite() { s.position - s.normal * d } else { s.position };
+    let w = ex.iter().sum::<f64>() * s.area;
+    let (mut graze0, mut graze1, mut graze_len) = ([0.0; 3], [0.0; 3], 0.0);
+    if graze.0 > 0 {
+        let chords: Vec<f64> = grazing_dirs(-s.normal, graze.1, graze.0)
+            .map(|dir| {
+                let o = s.position + dir * 1e-6;
+                setup.bvh.closest_hit(&Ray::new(o.to_array(), dir.to_array())).map_or(0.0, |h| h.t.max(0.0))
+            })
+            .collect();
+        let n = chords.len() as f64;
+        for c in 0..3 {
+            graze0[c] = s_int[c] * s.area;
+            graze1[c] = chords.iter().map(|&q| (-sigma_t[c] * q).exp()).sum::<f64>() * graze0[c] / n;
+        }
+        graze_len = chords.iter().sum::<f64>() / n * w;
+    }
+    SurfAgg {
+        power_ext,
+        power_int,
+        flux0,
+        flux1,
+        graze0,
+        graze1,
+        graze_len,
+        pos: s.position * w,
+        end: end * w,
+        normal: -s.normal * w,
+        w,
     }
 }
 
@@ -382,6 +446,42 @@ impl EmissionProfile {
         let int = if self.f_in > 0.0 { f / self.f_in } else { 0.0 };
         (ext, int)
     }
+
+    /// Median `cos θ` of the internally reflected light's flux, whose density in `μ = cos θ` is
+    /// `∝ F(μ) μ` (2048-point midpoint rule, linear within the cell); without reflection
+    /// (`F_dr,in = 0`) the Lambertian median `1/√2`.
+    pub fn grazing_median(&self) -> f64 {
+        let n = 2048;
+        let dens: Vec<f64> = (0..n)
+            .map(|i| {
+                let mu = (i as f64 + 0.5) / n as f64;
+                fresnel(mu, self.ior, 1.0) * mu
+            })
+            .collect();
+        let total: f64 = dens.iter().sum();
+        if total <= 0.0 {
+            return std::f64::consts::FRAC_1_SQRT_2;
+        }
+        let mut acc = 0.0;
+        for (i, d) in dens.iter().enumerate() {
+            if acc + d >= 0.5 * total {
+                return (i as f64 + (0.5 * total - acc) / d) / n as f64;
+            }
+            acc += d;
+        }
+        1.0
+    }
+}
+
+/// `k` unit directions at `cos θ = mu` from the unit axis `n`, evenly spread in azimuth about it
+/// (azimuth 0 along the first tangent of `frame_of(n)`).
+fn grazing_dirs(n: DVec3, mu: f64, k: u32) -> impl Iterator<Item = DVec3> {
+    let (t1, t2) = frame_of(n);
+    let sin = (1.0 - mu * mu).max(0.0).sqrt();
+    (0..k).map(move |i| {
+        let phi = 2.0 * PI * i as f64 / k as f64;
+        n * mu + (t1 * phi.cos() + t2 * phi.sin()) * sin
+    })
 }
 
 /// Light samples organised for rendering: what the paper recomputes when the light or the material
@@ -405,6 +505,8 @@ pub struct Prepared {
     /// Angular profile of the surface samples' emission: the index of refraction and `F_dr,out`,
     /// `F_dr,in` ([`EmissionProfile`]).
     pub emission_profile: EmissionProfile,
+    /// Median `cos θ` of the internally reflected light ([`EmissionProfile::grazing_median`]).
+    pub grazing_mu: f64,
     /// Terms of the internal-reflection series summed.
     pub reflection_terms: usize,
     /// Wall time of [`super::points::generate`], the trees and the inner irradiance \[ms\].
@@ -482,22 +584,15 @@ pub fn prepare(
         clamp,
         opts.reflection_terms,
     )?;
+    let profile = EmissionProfile { ior: m.ior, f_out, f_in };
+    let mu_graze = profile.grazing_median();
+    let n_graze = if f_in > 0.0 { opts.grazing_beams } else { 0 };
     let surf_items: Vec<SurfAgg> = points
         .surface
-        .iter()
+        .par_iter()
         .zip(&emission.exitance)
         .zip(&emission.chord)
-        .map(|((s, ex), &d)| {
-            // The exitance splits into the refracted scene light and the internal reflections.
-            let s_ext: [f64; 3] = std::array::from_fn(|c| ((1.0 - f_out) * s.indirect[c]).min(ex[c]));
-            let power_ext: [f64; 3] = std::array::from_fn(|c| s_ext[c] / PI * s.area);
-            let power_int: [f64; 3] = std::array::from_fn(|c| (ex[c] - s_ext[c]).max(0.0) / PI * s.area);
-            let flux0: [f64; 3] = std::array::from_fn(|c| ex[c] * s.area);
-            let flux1: [f64; 3] = std::array::from_fn(|c| flux0[c] * (-sigma_t[c] * d).exp());
-            let end = if d.is_finite() { s.position - s.normal * d } else { s.position };
-            let w = flux0.iter().sum::<f64>();
-            SurfAgg { power_ext, power_int, flux0, flux1, pos: s.position * w, end: end * w, normal: -s.normal * w, w }
-        })
+        .map(|((s, ex), &d)| surface_item(setup, s, *ex, d, f_out, (n_graze, mu_graze)))
         .collect();
     let surf_agg = surf_tree.bottom_up(
         |ids| SurfAgg::merge(&ids.iter().map(|&i| surf_items[i as usize]).collect::<Vec<_>>()),
@@ -524,7 +619,8 @@ pub fn prepare(
         inner_irradiance,
         exitance: emission.exitance,
         reflection_terms: emission.terms,
-        emission_profile: EmissionProfile { ior: m.ior, f_out, f_in },
+        emission_profile: profile,
+        grazing_mu: mu_graze,
         preprocess_ms: t0.elapsed().as_secs_f64() * 1e3,
         memory_bytes,
     })
@@ -1134,29 +1230,48 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
                 *o += eval.ch[c].albedo * eval.sigma(c) * power * cos * ph * (-eval.sigma(c) * r).exp() / (rc * rc);
             }
         }
-        // Orders ≥ 2 of the emitted light: the table's response to a beam along the mean inward normal,
-        // from the samples' positions with their flux minus from the chords' ends with what is left.
+        // Orders ≥ 2 of the emitted light: the table's response to beams from the samples' positions
+        // with their flux minus from the chords' ends with what is left there. The refracted scene
+        // light goes along the mean inward normal; the internally reflected light along
+        // `grazing_beams` beams at its median angle (or with the rest when there are none).
         let Some(dir) = nrm.try_normalize() else { continue };
         let end = a.end / a.w;
+        let n_graze = eval.opts.grazing_beams;
         for (c, o) in out.iter_mut().enumerate() {
-            if eval.ch[c].albedo <= 0.0 || a.flux0[c] <= 0.0 {
+            // Left out where all orders ≥ 2 are under 2 % of the first (as for the inner irradiance).
+            if !inner_needed(eval.ch[c].albedo) || a.flux0[c] + a.graze0[c] <= 0.0 {
                 continue;
             }
-            let look = |origin: DVec3, dir: DVec3| {
-                eval.slices[c].radiance((origin.to_array(), dir.to_array()), p.to_array(), w.to_array())
+            let look = |origin: DVec3, d: DVec3| {
+                eval.slices[c].radiance((origin.to_array(), d.to_array()), p.to_array(), w.to_array())
             };
-            let beam = |pos: DVec3, end: DVec3, dir: DVec3| {
-                let v0 = look(pos, dir).map_or(0.0, |v| v.total);
-                let v1 = if a.flux1[c] > 0.0 { look(end, dir).map_or(0.0, |v| v.total) } else { 0.0 };
-                (a.flux0[c] * v0 - a.flux1[c] * v1).max(0.0)
+            // Beam from `pos` along `d` with flux `f0`, ending at `end` with `f1`, minus its image about
+            // the sample's own plane (through `pos`, normal `dir`), moved out by `2 z_b`.
+            let beam = |end: DVec3, d: DVec3, f0: f64, f1: f64| {
+                let one = |pos: DVec3, end: DVec3, d: DVec3| {
+                    let v0 = look(pos, d).map_or(0.0, |v| v.total);
+                    // What is left at the end is skipped once it is a millionth of the start (thick
+                    // media): its response is at most that share of the beam's own near field.
+                    let v1 = if f1 > 1e-6 * f0 { look(end, d).map_or(0.0, |v| v.total) } else { 0.0 };
+                    (f0 * v0 - f1 * v1).max(0.0)
+                };
+                let real = one(pos, end, d);
+                let image = eval.z_b.map_or(0.0, |z| {
+                    let out = -dir * (2.0 * z[c]);
+                    one(pos + out, mirror_about(end, pos, dir) + out, d - 2.0 * d.dot(dir) * dir)
+                });
+                (real - image).max(0.0)
             };
-            let real = beam(pos, end, dir);
-            // Image about the sample's own plane (through `pos`, normal `dir`), moved out by `2 z_b`.
-            let image = eval.z_b.map_or(0.0, |z| {
-                let out = -dir * (2.0 * z[c]);
-                beam(pos + out, mirror_about(end, pos, dir) + out, -dir)
-            });
-            *o += (real - image).max(0.0);
+            if a.flux0[c] > 0.0 {
+                *o += beam(end, dir, a.flux0[c], a.flux1[c]);
+            }
+            if n_graze > 0 && a.graze0[c] > 0.0 {
+                let len = a.graze_len / a.w;
+                let (f0, f1) = (a.graze0[c] / n_graze as f64, a.graze1[c] / n_graze as f64);
+                for d in grazing_dirs(dir, prep.grazing_mu, n_graze) {
+                    *o += beam(pos + d * len, d, f0, f1);
+                }
+            }
         }
     }
     out
@@ -1659,6 +1774,26 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
         value: profile.factors(0.0).1,
         expect: Expect::Close { to: 1.0 / profile.f_in, rel: 1e-12 },
     });
+    // The grazing beams' angle: inside the total-reflection cone `F = 1`, so where the median lies in
+    // it, `m = √(F_dr,in/2)`; at η = 1 + 1e-6 the cone is 1.4e-3 wide and holds all but ~1e-7 of the
+    // reflected flux.
+    let steep = EmissionProfile { ior: 100.0, f_out: diffuse_fresnel(1.0, 100.0), f_in: diffuse_fresnel(100.0, 1.0) };
+    v.push(Row {
+        kind,
+        formula: "grazing-beam median cos θ",
+        input: "η = 100".into(),
+        value: steep.grazing_median(),
+        expect: Expect::Close { to: (steep.f_in / 2.0).sqrt(), rel: 1e-3 },
+    });
+    let eta = 1.0 + 1e-6;
+    let thin = EmissionProfile { ior: eta, f_out: diffuse_fresnel(1.0, eta), f_in: diffuse_fresnel(eta, 1.0) };
+    v.push(Row {
+        kind,
+        formula: "grazing-beam median cos θ",
+        input: "η = 1 + 1e-6".into(),
+        value: thin.grazing_median(),
+        expect: Expect::InRange(0.0, (1.0 - 1.0 / (eta * eta)).sqrt()),
+    });
     let stiff = Material { sigma_t: [1e-6, 1.0, 1e9], albedo: [1.0, 1.0, 0.0], g: 0.99, ior: 1.5 };
     v.push(Row {
         kind,
@@ -1765,6 +1900,71 @@ mod tests {
         assert!((s2 - DVec3::new(1.7, 0.0, 2.0)).length() < 1e-12, "{s2}");
         let (sm, ..) = VolAgg::merge(&[a, b]).image(0.25);
         assert!((sm - 0.5 * (s + s2)).length() < 1e-12, "{sm}");
+    }
+
+    /// The median of the internally reflected flux lies inside the total-reflection cone at η = 1.5,
+    /// where `F = 1`, so `∫₀^m μ dμ = F_dr,in/4` gives `m = √(F_dr,in/2)`; without an interface the
+    /// Lambertian median `1/√2`. The grazing directions sit at that cosine and spread evenly.
+    #[test]
+    fn grazing_median_and_directions() {
+        let f_in = diffuse_fresnel(1.5, 1.0);
+        let p = EmissionProfile { ior: 1.5, f_out: diffuse_fresnel(1.0, 1.5), f_in };
+        let m = p.grazing_median();
+        assert!(m < (1.0f64 - 1.0 / 2.25).sqrt());
+        assert!((m - (f_in / 2.0).sqrt()).abs() < 1e-4, "{m} vs {}", (f_in / 2.0).sqrt());
+        let matched = EmissionProfile { ior: 1.0, f_out: 0.0, f_in: 0.0 };
+        assert_eq!(matched.grazing_median(), std::f64::consts::FRAC_1_SQRT_2);
+        let n = DVec3::new(0.2, -0.9, 0.4).normalize();
+        let dirs: Vec<DVec3> = grazing_dirs(n, m, 4).collect();
+        for d in &dirs {
+            assert!((d.length() - 1.0).abs() < 1e-12 && (d.dot(n) - m).abs() < 1e-12);
+        }
+        let sum: DVec3 = dirs.iter().copied().sum();
+        assert!((sum - n * (4.0 * m)).length() < 1e-12, "{sum}");
+    }
+
+    /// On a ball of radius R every chord at `cos θ = μ` from the inward normal is `2Rμ`, so a sample's
+    /// grazing beams end `2Rμ` away with `e^{−σ_t 2Rμ}` of their flux left; the normal beam carries the
+    /// refracted scene light and the grazing beams the rest of the exitance (all of it on the normal
+    /// beam without them).
+    #[test]
+    fn grazing_beams_follow_the_chords_of_a_ball() {
+        let scene = super::super::object_light::ball_over_ground(0.05);
+        let bvh = crate::scene::bvh::SceneBvh::build(&scene);
+        let (c, radius) = (DVec3::new(0.0, 0.15, 0.0), 0.1);
+        let material = Material { sigma_t: [5.0, 10.0, 20.0], albedo: [0.9, 0.5, 0.2], g: 0.7, ior: 1.5 };
+        let setup = Setup { scene: &scene, bvh: &bvh, object: 0, material, emitters: &[] };
+        let f_out = diffuse_fresnel(1.0, 1.5);
+        let mu = EmissionProfile { ior: 1.5, f_out, f_in: diffuse_fresnel(1.5, 1.0) }.grazing_median();
+        let ex = [3.0, 2.0, 1.0];
+        for out in [DVec3::X, DVec3::new(0.3, 0.8, -0.5), DVec3::new(-0.6, -0.7, 0.2)] {
+            let out = out.normalize();
+            let hit = bvh.closest_hit(&Ray::new(c.to_array(), out.to_array())).unwrap();
+            let s = SurfaceSample {
+                position: c + out * hit.t,
+                normal: DVec3::from_array(hit.geometric_normal),
+                area: 1e-4,
+                triangle: hit.triangle as u32,
+                direct: [0.0; 3],
+                indirect: [0.5, 1.0, 4.0], // (1 − F_dr,out) E: below `ex` in R and G, capped in B
+            };
+            let a = surface_item(&setup, &s, ex, 0.2, f_out, (4, mu));
+            let len = a.graze_len / a.w;
+            assert!((len - 2.0 * radius * mu).abs() < 0.01 * 2.0 * radius * mu, "{len}");
+            for ch in 0..3 {
+                let s_ext = ((1.0 - f_out) * s.indirect[ch]).min(ex[ch]);
+                assert!((a.flux0[ch] - s_ext * s.area).abs() < 1e-15);
+                assert!((a.flux0[ch] + a.graze0[ch] - ex[ch] * s.area).abs() < 1e-15);
+                let left = (-material.sigma_t[ch] * 2.0 * radius * mu).exp() * a.graze0[ch];
+                assert!((a.graze1[ch] - left).abs() <= 0.01 * left, "channel {ch}");
+            }
+            assert_eq!(a.graze0[2], 0.0); // the scene light alone exceeds the exitance in B
+            let plain = surface_item(&setup, &s, ex, 0.2, f_out, (0, mu));
+            assert_eq!((plain.graze0, plain.graze_len), ([0.0; 3], 0.0));
+            for ch in 0..3 {
+                assert!((plain.flux0[ch] - ex[ch] * s.area).abs() < 1e-15);
+            }
+        }
     }
 
     /// Both emission profiles carry exactly the exitance (`2∫ k(μ) μ dμ = 1`, midpoint rule), the
