@@ -43,8 +43,11 @@
 //!    scattering-event density `σ_s φ`; `reflection_terms > 1` sums further internal reflections,
 //!    [`super::surface_light`]); a tree cut over the surface samples gathers their first scattering
 //!    `σ_s L_s A cos e^{−σ_t q}/q² p(q̂·ω)` and, beyond wang2018, the later orders of the same light: the
-//!    table's response to a beam along the node's mean inward normal (flux `S A` from the samples minus
-//!    what is left unscattered at their chords' ends, minus its image). The emission is not Lambertian:
+//!    table's response to beams from the node (flux `S A` from the samples minus what is left
+//!    unscattered at their chords' ends, minus their images): the refracted scene light along the
+//!    node's mean inward normal, the internally reflected light along `grazing_beams` beams spread in
+//!    azimuth at its median angle (`cos θ = √(F_dr,in/2)` = 0.55 at η = 1.5: in a ball, light beyond the
+//!    critical angle never comes nearer the centre than `R/η`). The emission is not Lambertian:
 //!    refracted scene light fills the critical cone, reflected light leans to grazing angles
 //!    ([`EmissionProfile`]). Same anchor pixels as multiple scattering.
 //!    *Scene rays* (beyond wang2018, on by default): the first scattering of the scene's light refracted
@@ -1243,16 +1246,16 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
                 continue;
             }
             let look = |origin: DVec3, d: DVec3| {
-                eval.slices[c].radiance((origin.to_array(), d.to_array()), p.to_array(), w.to_array())
+                eval.slices[c].total_radiance((origin.to_array(), d.to_array()), p.to_array(), w.to_array())
             };
             // Beam from `pos` along `d` with flux `f0`, ending at `end` with `f1`, minus its image about
             // the sample's own plane (through `pos`, normal `dir`), moved out by `2 z_b`.
             let beam = |end: DVec3, d: DVec3, f0: f64, f1: f64| {
                 let one = |pos: DVec3, end: DVec3, d: DVec3| {
-                    let v0 = look(pos, d).map_or(0.0, |v| v.total);
+                    let v0 = look(pos, d).unwrap_or(0.0);
                     // What is left at the end is skipped once it is a millionth of the start (thick
                     // media): its response is at most that share of the beam's own near field.
-                    let v1 = if f1 > 1e-6 * f0 { look(end, d).map_or(0.0, |v| v.total) } else { 0.0 };
+                    let v1 = if f1 > 1e-6 * f0 { look(end, d).unwrap_or(0.0) } else { 0.0 };
                     (f0 * v0 - f1 * v1).max(0.0)
                 };
                 let real = one(pos, end, d);

@@ -102,6 +102,17 @@ impl LobeSlice<'_> {
         scale_cubed(self.lobe(rho, z, theta, phi)?, st)
     }
 
+    /// The `total` of [`Self::radiance`] alone (one array sampled instead of two).
+    pub fn total_radiance(&self, beam: ([f64; 3], [f64; 3]), x: [f64; 3], omega: [f64; 3]) -> Result<f64, String> {
+        let m = &self.medium;
+        let st = m.sigma_t;
+        let (rho, z, theta, phi) = beam_coordinates(self.table.lobe, st, beam, x, omega)?;
+        let at: Located = self.table.locate(&LobeQuery { albedo: m.albedo, g: m.g, rho, z, theta, phi })?;
+        let lobe_len = self.table.theta_bins * self.table.phi_nodes;
+        let total = (at.sample(&self.total, lobe_len) * at.decay(self.kappa)).max(0.0);
+        Ok(scale_cubed(LobeValue { total, double: 0.0 }, st)?.total)
+    }
+
     /// `total − double` of [`Self::radiance`] (scattering orders ≥ 3) with one array look-up inside the
     /// grid (the same value up to rounding); beyond it the two parts decay at different rates and are
     /// looked up separately.

@@ -403,7 +403,7 @@ impl MsLobesTable {
     fn spatial_weights(&self, rho: f64, z: f64) -> [(usize, f64); 4] {
         let axis_w = |axis: &GradedAxis, x: f64| -> [(usize, f64); 2] {
             let c = (axis.coordinate(x) - 0.5).clamp(0.0, (axis.bins - 1) as f64);
-            let i = (c.floor() as usize).min(axis.bins.saturating_sub(2));
+            let i = (c as usize).min(axis.bins.saturating_sub(2)); // c ≥ 0: truncation is floor
             let f = (c - i as f64).clamp(0.0, 1.0);
             if axis.bins == 1 { [(0, 1.0), (0, 0.0)] } else { [(i, 1.0 - f), (i + 1, f)] }
         };
@@ -421,7 +421,7 @@ impl MsLobesTable {
     fn angular_weights(&self, theta: f64, phi: f64) -> [(usize, f64); 4] {
         let lin = |x: f64, n: usize| -> [(usize, f64); 2] {
             let c = (x / PI * (n - 1) as f64).clamp(0.0, (n - 1) as f64);
-            let i = (c.floor() as usize).min(n - 2);
+            let i = (c as usize).min(n - 2); // c ≥ 0: truncation is floor
             let f = c - i as f64;
             [(i, 1.0 - f), (i + 1, f)]
         };
@@ -507,7 +507,10 @@ pub(super) fn beam_coordinates(
     let r = dot(p, p).sqrt();
     let (a, e1) = if r > 0.0 {
         let a = [p[0] / r, p[1] / r, p[2] / r];
-        let e1 = if rho > 0.0 {
+        // φ's reference direction only matters to a φ-resolved lobe.
+        let e1 = if lobe != LobeKind::Full {
+            [0.0; 3]
+        } else if rho > 0.0 {
             let rh = [perp[0] / rho, perp[1] / rho, perp[2] / rho];
             [(z * rh[0] - rho * d[0]) / r, (z * rh[1] - rho * d[1]) / r, (z * rh[2] - rho * d[2]) / r]
         } else {
