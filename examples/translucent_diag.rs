@@ -64,6 +64,7 @@ fn main() {
             "eps1" => ropts.epsilon1 = v.parse().unwrap(),
             "eps2" => ropts.epsilon2 = v.parse().unwrap(),
             "epsm" => ropts.epsilon_multiple = v.parse().unwrap(),
+            "epsb" => ropts.epsilon_beams = v.parse().unwrap(),
             "clamp" => ropts.clamp_mfp = v.parse().unwrap(),
             "surf" => popts.surface_samples = v.parse().unwrap(),
             "terms" => ropts.reflection_terms = v.parse().unwrap(),

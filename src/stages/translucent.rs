@@ -102,6 +102,10 @@ crate::declare_params! {
         /// Solid angle above which a node is subdivided in the cuts for multiple and bounced scattering and the
         /// inner irradiance (1 sr: against 0.5 sr, 30 % less time and the same or lower MSE for Wax, Oil, Skin).
         epsilon_multiple: f64 = 1.0, unit = "sr", range = "> 0 and ≤ 4π";
+        /// Solid angle above which a surface node is subdivided in the cut for the later orders of the
+        /// boundary's light (its beams). 2 sr against 1 sr: bounced scattering 40 – 50 % faster, MSE Oil
+        /// 2.50e-3 → 2.32e-3, Skin 1.63e-3 → 1.55e-3, Wax 1.42e-3 → 1.45e-3; from 2π on only the root is left.
+        epsilon_beams: f64 = 2.0, unit = "sr", range = "> 0 and ≤ 4π";
         /// Single-scattering boxes are this many light-tube widths wide (density factor k_v = widen²).
         widen: f64 = 2.0, unit = "", range = "0.25 to 16";
         /// Clamp of the 1/r² of Eq. 6 and 8.
@@ -253,6 +257,7 @@ impl TranslucentRender {
         v.extend(range("epsilon1", self.epsilon1, 0.0, 4.0 * std::f64::consts::PI, true));
         v.extend(range("epsilon2", self.epsilon2, 0.0, self.epsilon1.max(0.0), true));
         v.extend(range("epsilon_multiple", self.epsilon_multiple, 0.0, 4.0 * std::f64::consts::PI, true));
+        v.extend(range("epsilon_beams", self.epsilon_beams, 0.0, 4.0 * std::f64::consts::PI, true));
         v.extend(range("widen", self.widen, 0.25, 16.0, false));
         v.extend(range("clamp_mfp", self.clamp_mfp, 0.0, 100.0, false));
         for (field, x, lo, hi) in [
@@ -301,6 +306,7 @@ impl TranslucentRender {
             epsilon1: self.epsilon1,
             epsilon2: self.epsilon2,
             epsilon_multiple: self.epsilon_multiple,
+            epsilon_beams: self.epsilon_beams,
             widen: self.widen,
             clamp_mfp: self.clamp_mfp,
             two_step: self.two_step,

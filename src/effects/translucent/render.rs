@@ -101,6 +101,10 @@ pub struct RenderOptions {
     /// Solid angle \[sr\] above which a node is subdivided in the cuts for multiple and bounced
     /// scattering (smooth terms, so coarser than `epsilon1`).
     pub epsilon_multiple: f64,
+    /// Solid angle \[sr\] above which a surface node is subdivided in the cut for the later orders of
+    /// the boundary's light (its beams; smoother still than the first scattering, which uses
+    /// `epsilon_multiple`). At or above 2π only the root is left.
+    pub epsilon_beams: f64,
     /// Algorithm 1: below `epsilon1`, still subdivide above this solid angle where a phase value is large.
     pub epsilon2: f64,
     /// Algorithm 1: the phase value \[1/sr\] above which a node between `epsilon2` and `epsilon1` is
@@ -153,6 +157,7 @@ impl Default for RenderOptions {
             camera_bounces: 1,
             epsilon1: 0.1,
             epsilon_multiple: 1.0,
+            epsilon_beams: 2.0,
             epsilon2: 0.01,
             phase_threshold: FRAC_PI_4,
             widen: 2.0,
@@ -195,6 +200,7 @@ impl RenderOptions {
             ("epsilon1", self.epsilon1),
             ("epsilon2", self.epsilon2),
             ("epsilon_multiple", self.epsilon_multiple),
+            ("epsilon_beams", self.epsilon_beams),
             ("widen", self.widen),
         ] {
             if !(v.is_finite() && v > 0.0) {
@@ -1188,28 +1194,32 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
     if tree.nodes.is_empty() {
         return out;
     }
-    cut.clear();
     let g = eval.ch[0].g;
-    tree.cut(
-        &[0],
-        |n| {
-            let a = &prep.surf_agg[n as usize];
-            let pos = if a.w > 0.0 {
-                a.pos / a.w
-            } else {
-                0.5 * (tree.nodes[n as usize].bounds.0 + tree.nodes[n as usize].bounds.1)
-            };
-            let node = &tree.nodes[n as usize];
-            let (radius, dist) = (half_diagonal(&node.bounds), (p - pos).length());
-            if node.is_leaf() { dist < radius } else { solid_angle(radius, dist) > eval.opts.epsilon_multiple }
-        },
-        cut,
-    );
+    let cut_at = |eps: f64, cut: &mut Vec<CutEntry>| {
+        cut.clear();
+        tree.cut(
+            &[0],
+            |n| {
+                let a = &prep.surf_agg[n as usize];
+                let pos = if a.w > 0.0 {
+                    a.pos / a.w
+                } else {
+                    0.5 * (tree.nodes[n as usize].bounds.0 + tree.nodes[n as usize].bounds.1)
+                };
+                let node = &tree.nodes[n as usize];
+                let (radius, dist) = (half_diagonal(&node.bounds), (p - pos).length());
+                if node.is_leaf() { dist < radius } else { solid_angle(radius, dist) > eps }
+            },
+            cut,
+        );
+    };
+    let entry = |e: &CutEntry| match *e {
+        CutEntry::Node(n) => &prep.surf_agg[n as usize],
+        CutEntry::Item(i) => &prep.surf_items[i as usize],
+    };
+    cut_at(eval.opts.epsilon_multiple, cut);
     for e in cut.iter() {
-        let a = match *e {
-            CutEntry::Node(n) => &prep.surf_agg[n as usize],
-            CutEntry::Item(i) => &prep.surf_items[i as usize],
-        };
+        let a = entry(e);
         if a.w <= 0.0 {
             continue;
         }
@@ -1233,6 +1243,17 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
                 *o += eval.ch[c].albedo * eval.sigma(c) * power * cos * ph * (-eval.sigma(c) * r).exp() / (rc * rc);
             }
         }
+    }
+    if eval.opts.epsilon_beams != eval.opts.epsilon_multiple {
+        cut_at(eval.opts.epsilon_beams, cut);
+    }
+    for e in cut.iter() {
+        let a = entry(e);
+        if a.w <= 0.0 {
+            continue;
+        }
+        let pos = a.pos / a.w;
+        let nrm = a.normal / a.w;
         // Orders ≥ 2 of the emitted light: the table's response to beams from the samples' positions
         // with their flux minus from the chords' ends with what is left there. The refracted scene
         // light goes along the mean inward normal; the internally reflected light along
