@@ -6,7 +6,8 @@
 //! `key=value` knobs (`k_max`, `eps1`, `eps2`, `epsm`, `clamp`, `surf`, `terms`, `image=0|1` (image
 //! beams), `stride` (anchor-pixel stride), `ior` (override the object's), `black=1` (black ground: the
 //! lamp alone lights the object), `drays` (diffuse rays per primary opaque hit), `srays` (scene rays
-//! per camera sample; 0: the surface samples), `olight=0` (no caustic and glow photons), `dump=PATH`
+//! per camera sample; 0: the surface samples), `graze` (grazing beams per surface sample), `epsb` (the
+//! beams' cut \[sr\]), `olight=0` (no caustic and glow photons), `dump=PATH`
 //! (both images and the components as JSON), `table=PATH` (another `MsLobes` table)) → per component (rest,
 //! single, double, multiple + bounced against the reference's 0 / 1 / 2 / ≥ 3 medium events) the
 //! normalised MSE, the reference's own noise from two independent seeds (`E[(A − B)²]/4` for their
