@@ -7,7 +7,7 @@
 //! beams), `stride` (anchor-pixel stride), `ior` (override the object's), `black=1` (black ground: the
 //! lamp alone lights the object), `drays` (diffuse rays per primary opaque hit), `srays` (scene rays
 //! per camera sample; 0: the surface samples), `graze` (grazing beams per surface sample), `epsb` (the
-//! beams' cut \[sr\]), `olight=0` (no caustic and glow photons), `dump=PATH`
+//! beams' cut \[sr\]), `disk` (points per tube disk in Eq. 6), `olight=0` (no caustic and glow photons), `dump=PATH`
 //! (both images and the components as JSON), `table=PATH` (another `MsLobes` table)) → per component (rest,
 //! single, double, multiple + bounced against the reference's 0 / 1 / 2 / ≥ 3 medium events) the
 //! normalised MSE, the reference's own noise from two independent seeds (`E[(A − B)²]/4` for their
@@ -66,6 +66,7 @@ fn main() {
             "eps2" => ropts.epsilon2 = v.parse().unwrap(),
             "epsm" => ropts.epsilon_multiple = v.parse().unwrap(),
             "epsb" => ropts.epsilon_beams = v.parse().unwrap(),
+            "disk" => ropts.double_disk = v.parse().unwrap(),
             "clamp" => ropts.clamp_mfp = v.parse().unwrap(),
             "surf" => popts.surface_samples = v.parse().unwrap(),
             "terms" => ropts.reflection_terms = v.parse().unwrap(),

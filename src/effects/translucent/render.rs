@@ -136,6 +136,9 @@ pub struct RenderOptions {
     /// (the scene seen through the object and scattered once toward the camera); 0 takes it from the
     /// surface samples' emission instead (wang2018 Eq. 8).
     pub scene_rays: u32,
+    /// Points over a light tube's cross-section that stand for a volume sample in double scattering
+    /// (Eq. 6) within [`DISK_REACH`] tube radii of it (0: its centre alone, as in wang2018).
+    pub double_disk: u32,
     /// Beams, spread in azimuth, that carry the later orders of the internally reflected light each
     /// surface sample sends in, at the median polar angle of its `F(θ) cos θ` profile (grazing: in a
     /// sphere the light beyond the critical angle never comes nearer the centre than `R/η`); 0 sends
@@ -169,6 +172,7 @@ impl Default for RenderOptions {
             smooth_stride: 4,
             scene_rays: 16,
             grazing_beams: 4,
+            double_disk: 16,
             stop_height: 3,
             seed: 0,
         }
@@ -189,6 +193,9 @@ impl RenderOptions {
         }
         if self.scene_rays > 4096 {
             return Err(format!("scene_rays = {} must lie in 0..=4096", self.scene_rays));
+        }
+        if self.double_disk > 1024 {
+            return Err(format!("double_disk = {} must lie in 0..=1024", self.double_disk));
         }
         if self.grazing_beams > 64 {
             return Err(format!("grazing_beams = {} must lie in 0..=64", self.grazing_beams));
@@ -223,6 +230,12 @@ impl RenderOptions {
     }
 }
 
+/// Eq. 6 spreads a volume sample over its tube's disk within this many tube radii of its centre;
+/// beyond, the disk and its centre differ by under about `1/(2·3²)` in `1/r²`.
+const DISK_REACH: f64 = 3.0;
+/// `π (3 − √5)`: successive points of a Vogel spiral.
+const GOLDEN_ANGLE: f64 = 2.399_963_229_728_653;
+
 /// `x` mirrored about the plane through `q` with unit normal `n`.
 fn mirror_about(x: DVec3, q: DVec3, n: DVec3) -> DVec3 {
     x - 2.0 * (x - q).dot(n) * n
@@ -245,6 +258,8 @@ struct VolAgg {
     end: DVec3,
     /// Sum of track-length-weighted directions (its length over the weight is the directions' spread).
     dir_sum: DVec3,
+    /// Track-length-weighted light-tube cross-section \[m²·W·m\] (divided by `w_lam` when read).
+    tube: f64,
     /// Scalar weights of the centroids.
     w_lam: f64,
     w0: f64,
@@ -276,6 +291,7 @@ impl VolAgg {
             start: v.start * w0,
             end: v.end() * w1,
             dir_sum: v.direction * w_lam,
+            tube: v.area * w_lam,
             w_lam,
             w0,
             w1,
@@ -303,6 +319,7 @@ impl VolAgg {
             a.start += p.start;
             a.end += p.end;
             a.dir_sum += p.dir_sum;
+            a.tube += p.tube;
             a.istart += p.istart;
             a.inormal0 += p.inormal0;
             a.iend += p.iend;
@@ -849,6 +866,7 @@ impl<'a> Evaluator<'a> {
         self.vol_tree.cut(&[0], |n| self.refine(n, p, w), cut);
         let mut dbl = [0.0; 3];
         let g = self.ch[0].g;
+        let n_disk = self.opts.double_disk as usize;
         for e in cut.iter() {
             let a = self.entry(e);
             let (center, _, _, dir) = a.points();
@@ -857,10 +875,37 @@ impl<'a> Evaluator<'a> {
             if r > 0.0 {
                 let rh = rv / r;
                 let pp = phase(dir.dot(rh), g) * phase(rh.dot(w), g);
+                let a2 = if a.w_lam > 0.0 { a.tube / a.w_lam / PI } else { 0.0 };
+                if n_disk > 0 && r * r < DISK_REACH * DISK_REACH * a2 {
+                    // Near its tube the sample's light is spread over the tube's cross-section, not
+                    // concentrated at its centre: average Eq. 6 over `n_disk` equal-area points of
+                    // that disk (a Vogel spiral), so the sum keeps the sample's power.
+                    let (t1, t2) = frame_of(dir.try_normalize().unwrap_or(DVec3::Z));
+                    let radius = a2.sqrt();
+                    let share = 1.0 / n_disk as f64;
+                    for k in 0..n_disk {
+                        let rr = radius * ((k as f64 + 0.5) * share).sqrt();
+                        let ang = k as f64 * GOLDEN_ANGLE;
+                        let qv = p - (center + (t1 * ang.cos() + t2 * ang.sin()) * rr);
+                        let rq = qv.length();
+                        if rq <= 0.0 {
+                            continue;
+                        }
+                        let qh = qv / rq;
+                        let ppq = phase(dir.dot(qh), g) * phase(qh.dot(w), g);
+                        for (c, dc) in dbl.iter_mut().enumerate() {
+                            let ss = self.ch[c].albedo * self.sigma(c);
+                            let rc = self.clamp_r(rq, c);
+                            *dc += ss * ss * a.lam[c] * share * (-self.sigma(c) * rq).exp() / (rc * rc) * ppq;
+                        }
+                    }
+                    continue;
+                }
                 for (c, dc) in dbl.iter_mut().enumerate() {
                     let ss = self.ch[c].albedo * self.sigma(c);
                     let rc = self.clamp_r(r, c);
-                    *dc += ss * ss * a.lam[c] * (-self.sigma(c) * r).exp() / (rc * rc) * pp;
+                    let k = (-self.sigma(c) * r).exp() / (rc * rc);
+                    *dc += ss * ss * a.lam[c] * k * pp;
                 }
             }
         }
@@ -1989,6 +2034,43 @@ mod tests {
                 assert!((plain.flux0[ch] - ex[ch] * s.area).abs() < 1e-15);
             }
         }
+    }
+
+    /// Eq. 6 near a volume sample averages `1/r²` over its tube's disk: on the disk's axis at height
+    /// `h` that average is `ln(1 + a²/h²)/a²` (σ → 0, g = 0 so both phase values are `1/4π`); with
+    /// `double_disk: 0`, and beyond `DISK_REACH` radii, the centre's `1/h²`.
+    #[test]
+    fn double_scattering_spreads_a_sample_over_its_tube() {
+        let scene = super::super::object_light::ball_over_ground(0.05);
+        let bvh = crate::scene::bvh::SceneBvh::build(&scene);
+        let sigma = 1e-3;
+        let material = Material { sigma_t: [sigma; 3], albedo: [1.0; 3], g: 0.0, ior: 1.0 };
+        let setup = Setup { scene: &scene, bvh: &bvh, object: 0, material, emitters: &[] };
+        let a = 0.01;
+        let mut v = sample(DVec3::ZERO, DVec3::Z, DVec3::ZERO, -DVec3::Z);
+        v.length = 1e-4;
+        v.area = PI * a * a;
+        let items = [Item { position: v.center(), bounds: v.obb(2.0).aabb() }];
+        let tree = Octree::build(&items, 8, 24);
+        let vol_items = [VolAgg::of_sample(&v, material.sigma_t)];
+        let agg = tree.bottom_up(
+            |ids| VolAgg::merge(&ids.iter().map(|&i| vol_items[i as usize]).collect::<Vec<_>>()),
+            VolAgg::merge,
+        );
+        let lam = vol_items[0].lam[0];
+        let scale = sigma * sigma * lam / (16.0 * PI * PI); // σ_s² Λ p p
+        let at = |n: u32, h: f64| {
+            let opts = RenderOptions { double_disk: n, clamp_mfp: 0.0, ..RenderOptions::default() };
+            let eval = Evaluator::new(&setup, &[], &opts, (&tree, &agg, &vol_items));
+            eval.double(v.center() + DVec3::Z * h, DVec3::X, &mut Vec::new()).0[1] / scale
+        };
+        let h = 0.5 * a;
+        let want = (1.0 + a * a / (h * h)).ln() / (a * a);
+        let got = at(4096, h);
+        assert!((got - want).abs() < 2e-3 * want, "{got} vs {want}");
+        assert!((at(0, h) - 1.0 / (h * h)).abs() < 1e-4 / (h * h));
+        let far = 3.5 * a;
+        assert!((at(4096, far) - 1.0 / (far * far)).abs() < 1e-4 / (far * far));
     }
 
     /// Both emission profiles carry exactly the exitance (`2∫ k(μ) μ dμ = 1`, midpoint rule), the
