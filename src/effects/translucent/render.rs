@@ -27,7 +27,10 @@
 //! 3. *Double and multiple scattering* at `k` camera samples per segment placed by Eq. 10 (midpoints of
 //!    `k` intervals of equal attenuation mass, so the quadrature weights are equal): one tree cut over
 //!    the volume samples (Algorithm 1) serves both. Double (Eq. 6):
-//!    `σ_s² Λ_v e^{−σ_t r}/r² p(d̂_v·r̂) p(r̂·ω)`, `Λ_v = ∫Φ` the sample's track length. Multiple (Eq. 7):
+//!    `σ_s² Λ_v e^{−σ_t r}/r² p(d̂_v·r̂) p(r̂·ω)`, `Λ_v = ∫Φ` the sample's track length; within
+//!    `DISK_REACH` tube radii a sample is spread over `double_disk` equal-area points of its tube's
+//!    cross-section (beyond wang2018: the tubes are wider than Wax's and Skin's mean free path, and
+//!    the centre alone gave a speckled `1/r²` peak). Multiple (Eq. 7):
 //!    the table's lobes of orders ≥ 3 (`total − double`) for the beam of each cut entry: a volume
 //!    sample is the part of a beam between two points, so its response is exactly the beam from its
 //!    start with its entering flux minus the beam from its end with its leaving flux; a node uses the
