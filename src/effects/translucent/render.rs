@@ -140,7 +140,7 @@ pub struct RenderOptions {
     /// surface samples' emission instead (wang2018 Eq. 8).
     pub scene_rays: u32,
     /// Points over a light tube's cross-section that stand for a volume sample in double scattering
-    /// (Eq. 6) within [`DISK_REACH`] tube radii of it (0: its centre alone, as in wang2018).
+    /// (Eq. 6) within 3 tube radii of it (`DISK_REACH`; 0: its centre alone, as in wang2018).
     pub double_disk: u32,
     /// Beams, spread in azimuth, that carry the later orders of the internally reflected light each
     /// surface sample sends in, at the median polar angle of its `F(θ) cos θ` profile (grazing: in a
