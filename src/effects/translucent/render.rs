@@ -2023,18 +2023,18 @@ mod tests {
             let a = surface_item(&setup, &s, ex, 0.2, f_out, (4, mu));
             let len = a.graze_len / a.w;
             assert!((len - 2.0 * radius * mu).abs() < 0.01 * 2.0 * radius * mu, "{len}");
-            for ch in 0..3 {
-                let s_ext = ((1.0 - f_out) * s.indirect[ch]).min(ex[ch]);
+            for (ch, &e) in ex.iter().enumerate() {
+                let s_ext = ((1.0 - f_out) * s.indirect[ch]).min(e);
                 assert!((a.flux0[ch] - s_ext * s.area).abs() < 1e-15);
-                assert!((a.flux0[ch] + a.graze0[ch] - ex[ch] * s.area).abs() < 1e-15);
+                assert!((a.flux0[ch] + a.graze0[ch] - e * s.area).abs() < 1e-15);
                 let left = (-material.sigma_t[ch] * 2.0 * radius * mu).exp() * a.graze0[ch];
                 assert!((a.graze1[ch] - left).abs() <= 0.01 * left, "channel {ch}");
             }
             assert_eq!(a.graze0[2], 0.0); // the scene light alone exceeds the exitance in B
             let plain = surface_item(&setup, &s, ex, 0.2, f_out, (0, mu));
             assert_eq!((plain.graze0, plain.graze_len), ([0.0; 3], 0.0));
-            for ch in 0..3 {
-                assert!((plain.flux0[ch] - ex[ch] * s.area).abs() < 1e-15);
+            for (f, e) in plain.flux0.iter().zip(ex) {
+                assert!((f - e * s.area).abs() < 1e-15);
             }
         }
     }
