@@ -424,11 +424,9 @@ fn surface_item(setup: &Setup, s: &SurfaceSample, ex: [f64; 3], d: f64, f_out: f
     let w = ex.iter().sum::<f64>() * s.area;
     let (mut graze0, mut graze1, mut graze_len) = ([0.0; 3], [0.0; 3], 0.0);
     if graze.0 > 0 {
+        // A ray that hits nothing (an open mesh) counts as a chord of length 0: nothing scatters.
         let chords: Vec<f64> = grazing_dirs(-s.normal, graze.1, graze.0)
-            .map(|dir| {
-                let o = s.position + dir * 1e-6;
-                setup.bvh.closest_hit(&Ray::new(o.to_array(), dir.to_array())).map_or(0.0, |h| h.t.max(0.0))
-            })
+            .map(|dir| Some(super::surface_light::chord(setup, s, dir)).filter(|q| q.is_finite()).unwrap_or(0.0))
             .collect();
         let n = chords.len() as f64;
         for c in 0..3 {

@@ -82,9 +82,9 @@ pub struct Emission {
     pub terms: usize,
 }
 
-/// Chord from a surface sample along its inward normal to the far side of the object.
-fn chord(setup: &Setup, s: &SurfaceSample) -> f64 {
-    let d = -s.normal;
+/// Chord from a surface sample along the unit direction `d` (into the object) to the far side of the
+/// object (∞ when the ray hits nothing).
+pub(super) fn chord(setup: &Setup, s: &SurfaceSample, d: DVec3) -> f64 {
     let o = s.position + d * 1e-6;
     setup.bvh.closest_hit(&Ray::new(o.to_array(), d.to_array())).map_or(f64::INFINITY, |h| h.t.max(0.0))
 }
@@ -105,7 +105,7 @@ pub fn emission(
     max_terms: usize,
 ) -> Result<Emission, String> {
     let m: Material = setup.material;
-    let chord: Vec<f64> = samples.par_iter().map(|s| chord(setup, s)).collect();
+    let chord: Vec<f64> = samples.par_iter().map(|s| chord(setup, s, -s.normal)).collect();
     let first: Vec<[f64; 3]> = samples
         .iter()
         .zip(e_vol)
