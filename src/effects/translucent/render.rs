@@ -874,8 +874,6 @@ impl<'a> Evaluator<'a> {
             let rv = p - center;
             let r = rv.length();
             if r > 0.0 {
-                let rh = rv / r;
-                let pp = phase(dir.dot(rh), g) * phase(rh.dot(w), g);
                 let a2 = if a.w_lam > 0.0 { a.tube / a.w_lam / PI } else { 0.0 };
                 if n_disk > 0 && r * r < DISK_REACH * DISK_REACH * a2 {
                     // Near its tube the sample's light is spread over the tube's cross-section, not
@@ -902,11 +900,12 @@ impl<'a> Evaluator<'a> {
                     }
                     continue;
                 }
+                let rh = rv / r;
+                let pp = phase(dir.dot(rh), g) * phase(rh.dot(w), g);
                 for (c, dc) in dbl.iter_mut().enumerate() {
                     let ss = self.ch[c].albedo * self.sigma(c);
                     let rc = self.clamp_r(r, c);
-                    let k = (-self.sigma(c) * r).exp() / (rc * rc);
-                    *dc += ss * ss * a.lam[c] * k * pp;
+                    *dc += ss * ss * a.lam[c] * (-self.sigma(c) * r).exp() / (rc * rc) * pp;
                 }
             }
         }
@@ -1259,18 +1258,17 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
             cut,
         );
     };
-    let entry = |e: &CutEntry| match *e {
-        CutEntry::Node(n) => &prep.surf_agg[n as usize],
-        CutEntry::Item(i) => &prep.surf_items[i as usize],
+    // A cut entry with power: its aggregate, power-weighted position and mean inward normal (shorter
+    // than 1 where the normals spread).
+    let entry = |e: &CutEntry| {
+        let a = match *e {
+            CutEntry::Node(n) => &prep.surf_agg[n as usize],
+            CutEntry::Item(i) => &prep.surf_items[i as usize],
+        };
+        (a.w > 0.0).then(|| (a, a.pos / a.w, a.normal / a.w))
     };
     cut_at(eval.opts.epsilon_multiple, cut);
-    for e in cut.iter() {
-        let a = entry(e);
-        if a.w <= 0.0 {
-            continue;
-        }
-        let pos = a.pos / a.w;
-        let nrm = a.normal / a.w; // shorter than 1 where the normals spread
+    for (a, pos, nrm) in cut.iter().filter_map(entry) {
         let q = p - pos;
         let r = q.length();
         if r <= 0.0 {
@@ -1293,20 +1291,20 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
     if eval.opts.epsilon_beams != eval.opts.epsilon_multiple {
         cut_at(eval.opts.epsilon_beams, cut);
     }
-    for e in cut.iter() {
-        let a = entry(e);
-        if a.w <= 0.0 {
-            continue;
-        }
-        let pos = a.pos / a.w;
-        let nrm = a.normal / a.w;
+    let n_graze = eval.opts.grazing_beams as usize;
+    let mut graze_dirs = [DVec3::ZERO; 64]; // grazing_beams ≤ 64 (RenderOptions::check)
+    for (a, pos, nrm) in cut.iter().filter_map(entry) {
         // Orders ≥ 2 of the emitted light: the table's response to beams from the samples' positions
         // with their flux minus from the chords' ends with what is left there. The refracted scene
         // light goes along the mean inward normal; the internally reflected light along
         // `grazing_beams` beams at its median angle (or with the rest when there are none).
         let Some(dir) = nrm.try_normalize() else { continue };
         let end = a.end / a.w;
-        let n_graze = eval.opts.grazing_beams;
+        let graze = &mut graze_dirs[..n_graze];
+        for (slot, d) in graze.iter_mut().zip(grazing_dirs(dir, prep.grazing_mu, n_graze as u32)) {
+            *slot = d;
+        }
+        let graze = &*graze;
         for (c, o) in out.iter_mut().enumerate() {
             // Left out where all orders ≥ 2 are under 2 % of the first (as for the inner irradiance).
             if !inner_needed(eval.ch[c].albedo) || a.flux0[c] + a.graze0[c] <= 0.0 {
@@ -1338,7 +1336,7 @@ fn bounced_at(eval: &Evaluator, prep: &Prepared, p: DVec3, w: DVec3, cut: &mut V
             if n_graze > 0 && a.graze0[c] > 0.0 {
                 let len = a.graze_len / a.w;
                 let (f0, f1) = (a.graze0[c] / n_graze as f64, a.graze1[c] / n_graze as f64);
-                for d in grazing_dirs(dir, prep.grazing_mu, n_graze) {
+                for &d in graze {
                     *o += beam(pos + d * len, d, f0, f1);
                 }
             }
