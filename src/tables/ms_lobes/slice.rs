@@ -84,12 +84,24 @@ impl LobeSlice<'_> {
         &self.medium
     }
 
+    /// The table's interpolation weights at canonical `(ρ, z, θ, φ)` for this channel.
+    fn locate(&self, rho: f64, z: f64, theta: f64, phi: f64) -> Result<Located, String> {
+        let m = &self.medium;
+        self.table.locate(&LobeQuery { albedo: m.albedo, g: m.g, rho, z, theta, phi })
+    }
+
+    /// The canonical `total` (all orders ≥ 2) at located weights, with its outward decay.
+    fn total_at(&self, at: &Located) -> f64 {
+        let lobe_len = self.table.theta_bins * self.table.phi_nodes;
+        (at.sample(&self.total, lobe_len) * at.decay(self.kappa)).max(0.0)
+    }
+
     /// [`MsLobesTable::lobe`] at canonical `(ρ, z, θ, φ)` for this channel.
     pub fn lobe(&self, rho: f64, z: f64, theta: f64, phi: f64) -> Result<LobeValue, String> {
         let m = &self.medium;
-        let at: Located = self.table.locate(&LobeQuery { albedo: m.albedo, g: m.g, rho, z, theta, phi })?;
+        let at = self.locate(rho, z, theta, phi)?;
         let lobe_len = self.table.theta_bins * self.table.phi_nodes;
-        let total = (at.sample(&self.total, lobe_len) * at.decay(self.kappa)).max(0.0);
+        let total = self.total_at(&at);
         let double = (m.albedo * m.albedo * (at.sample(&self.e2, lobe_len) * at.decay(self.kappa_double))).max(0.0);
         Ok(LobeValue { total, double })
     }
@@ -104,12 +116,9 @@ impl LobeSlice<'_> {
 
     /// The `total` of [`Self::radiance`] alone (one array sampled instead of two).
     pub fn total_radiance(&self, beam: ([f64; 3], [f64; 3]), x: [f64; 3], omega: [f64; 3]) -> Result<f64, String> {
-        let m = &self.medium;
-        let st = m.sigma_t;
+        let st = self.medium.sigma_t;
         let (rho, z, theta, phi) = beam_coordinates(self.table.lobe, st, beam, x, omega)?;
-        let at: Located = self.table.locate(&LobeQuery { albedo: m.albedo, g: m.g, rho, z, theta, phi })?;
-        let lobe_len = self.table.theta_bins * self.table.phi_nodes;
-        let total = (at.sample(&self.total, lobe_len) * at.decay(self.kappa)).max(0.0);
+        let total = self.total_at(&self.locate(rho, z, theta, phi)?);
         Ok(scale_cubed(LobeValue { total, double: 0.0 }, st)?.total)
     }
 
@@ -117,10 +126,9 @@ impl LobeSlice<'_> {
     /// grid (the same value up to rounding); beyond it the two parts decay at different rates and are
     /// looked up separately.
     pub fn multiple_radiance(&self, beam: ([f64; 3], [f64; 3]), x: [f64; 3], omega: [f64; 3]) -> Result<f64, String> {
-        let m = &self.medium;
-        let st = m.sigma_t;
+        let st = self.medium.sigma_t;
         let (rho, z, theta, phi) = beam_coordinates(self.table.lobe, st, beam, x, omega)?;
-        let at: Located = self.table.locate(&LobeQuery { albedo: m.albedo, g: m.g, rho, z, theta, phi })?;
+        let at = self.locate(rho, z, theta, phi)?;
         if at.decay(self.kappa) == 1.0 && at.decay(self.kappa_double) == 1.0 {
             let lobe_len = self.table.theta_bins * self.table.phi_nodes;
             let v = scale_cubed(LobeValue { total: at.sample(&self.multiple, lobe_len), double: 0.0 }, st)?;
@@ -132,8 +140,7 @@ impl LobeSlice<'_> {
 
     /// [`MsLobesTable::density`] at canonical `(ρ, z)` for this channel.
     pub fn density(&self, rho: f64, z: f64) -> Result<f64, String> {
-        let m = &self.medium;
-        let at = self.table.locate(&LobeQuery { albedo: m.albedo, g: m.g, rho, z, theta: 0.0, phi: 0.0 })?;
+        let at = self.locate(rho, z, 0.0, 0.0)?;
         Ok(at.sample_cells(&self.density) * at.decay(self.kappa))
     }
 }
