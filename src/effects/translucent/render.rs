@@ -868,45 +868,43 @@ impl<'a> Evaluator<'a> {
         let mut dbl = [0.0; 3];
         let g = self.ch[0].g;
         let n_disk = self.opts.double_disk as usize;
+        // Eq. 6 for light of track length `weight · Λ` scattered at `p − qv` (travel direction `dir`).
+        let add = |dbl: &mut [f64; 3], qv: DVec3, lam: &[f64; 3], dir: DVec3, weight: f64| {
+            let rq = qv.length();
+            if rq <= 0.0 {
+                return;
+            }
+            let qh = qv / rq;
+            let pp = phase(dir.dot(qh), g) * phase(qh.dot(w), g);
+            for (c, dc) in dbl.iter_mut().enumerate() {
+                let ss = self.ch[c].albedo * self.sigma(c);
+                let rc = self.clamp_r(rq, c);
+                *dc += ss * ss * lam[c] * weight * (-self.sigma(c) * rq).exp() / (rc * rc) * pp;
+            }
+        };
         for e in cut.iter() {
             let a = self.entry(e);
             let (center, _, _, dir) = a.points();
             let rv = p - center;
             let r = rv.length();
-            if r > 0.0 {
-                let a2 = if a.w_lam > 0.0 { a.tube / a.w_lam / PI } else { 0.0 };
-                if n_disk > 0 && r * r < DISK_REACH * DISK_REACH * a2 {
-                    // Near its tube the sample's light is spread over the tube's cross-section, not
-                    // concentrated at its centre: average Eq. 6 over `n_disk` equal-area points of
-                    // that disk (a Vogel spiral), so the sum keeps the sample's power.
-                    let (t1, t2) = frame_of(dir.try_normalize().unwrap_or(DVec3::Z));
-                    let radius = a2.sqrt();
-                    let share = 1.0 / n_disk as f64;
-                    for k in 0..n_disk {
-                        let rr = radius * ((k as f64 + 0.5) * share).sqrt();
-                        let ang = k as f64 * GOLDEN_ANGLE;
-                        let qv = p - (center + (t1 * ang.cos() + t2 * ang.sin()) * rr);
-                        let rq = qv.length();
-                        if rq <= 0.0 {
-                            continue;
-                        }
-                        let qh = qv / rq;
-                        let ppq = phase(dir.dot(qh), g) * phase(qh.dot(w), g);
-                        for (c, dc) in dbl.iter_mut().enumerate() {
-                            let ss = self.ch[c].albedo * self.sigma(c);
-                            let rc = self.clamp_r(rq, c);
-                            *dc += ss * ss * a.lam[c] * share * (-self.sigma(c) * rq).exp() / (rc * rc) * ppq;
-                        }
-                    }
-                    continue;
+            if r <= 0.0 {
+                continue;
+            }
+            let a2 = if a.w_lam > 0.0 { a.tube / a.w_lam / PI } else { 0.0 };
+            if n_disk > 0 && r * r < DISK_REACH * DISK_REACH * a2 {
+                // Near its tube the sample's light is spread over the tube's cross-section, not
+                // concentrated at its centre: average Eq. 6 over `n_disk` equal-area points of that
+                // disk (a Vogel spiral), so the sum keeps the sample's power.
+                let (t1, t2) = frame_of(dir.try_normalize().unwrap_or(DVec3::Z));
+                let radius = a2.sqrt();
+                let share = 1.0 / n_disk as f64;
+                for k in 0..n_disk {
+                    let rr = radius * ((k as f64 + 0.5) * share).sqrt();
+                    let ang = k as f64 * GOLDEN_ANGLE;
+                    add(&mut dbl, p - (center + (t1 * ang.cos() + t2 * ang.sin()) * rr), &a.lam, dir, share);
                 }
-                let rh = rv / r;
-                let pp = phase(dir.dot(rh), g) * phase(rh.dot(w), g);
-                for (c, dc) in dbl.iter_mut().enumerate() {
-                    let ss = self.ch[c].albedo * self.sigma(c);
-                    let rc = self.clamp_r(r, c);
-                    *dc += ss * ss * a.lam[c] * (-self.sigma(c) * r).exp() / (rc * rc) * pp;
-                }
+            } else {
+                add(&mut dbl, rv, &a.lam, dir, 1.0);
             }
         }
         (dbl, cut.len())
