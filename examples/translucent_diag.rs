@@ -12,7 +12,7 @@
 //! single, double, multiple + bounced against the reference's 0 / 1 / 2 / ≥ 3 medium events) the
 //! normalised MSE, the reference's own noise from two independent seeds (`E[(A − B)²]/4` for their
 //! mean), their difference, and the ratio of the component sums over the object's pixels (the bias).
-//! Normalisation as in `effects::translucent::compare` (the reference's 99th-percentile object value).
+//! Normalisation as in `stages::translucent::compare` (the reference's 99th-percentile object value).
 //! The references are cached as JSON in `$TMPDIR/translucent_ref`.
 //!
 //! Needs `out/ms_lobes_table2.vtab` (`voltab compile`). Run from the repository root:
@@ -21,13 +21,13 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use voltab::effects::ViewCamera;
-use voltab::effects::translucent::points::PointOptions;
-use voltab::effects::translucent::reference::{self, ReferenceOptions};
-use voltab::effects::translucent::render::{self, RenderOptions};
-use voltab::effects::translucent::{Material, Setup, emitters, find_object};
+use voltab::render::ViewCamera;
 use voltab::scene::Scene;
 use voltab::scene::bvh::SceneBvh;
+use voltab::stages::translucent::points::PointOptions;
+use voltab::stages::translucent::reference::{self, ReferenceOptions};
+use voltab::stages::translucent::render::{self, RenderOptions};
+use voltab::stages::translucent::{Material, Setup, emitters, find_object};
 use voltab::tables::ms_lobes::MsLobesTable;
 
 type Img = Vec<[f64; 3]>;

@@ -44,8 +44,8 @@ enum Command {
         scene: Vec<PathBuf>,
         /// Where the real-time effects run: auto = the GPU when this build has the `gpu` feature
         /// and an adapter is found, else the CPU (the choice and the reason are printed).
-        #[arg(long, value_enum, default_value_t = voltab::gpu::DeviceRequest::Auto)]
-        device: voltab::gpu::DeviceRequest,
+        #[arg(long, value_enum, default_value_t = voltab::render::gpu::DeviceRequest::Auto)]
+        device: voltab::render::gpu::DeviceRequest,
     },
     /// Compile tables (incrementally: unchanged tables are not recomputed).
     Compile {
@@ -485,9 +485,9 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
         jobs: None,
         json: false,
         scene: bundled_scenes(),
-        device: voltab::gpu::DeviceRequest::Auto,
+        device: voltab::render::gpu::DeviceRequest::Auto,
     });
-    let cpu_device = voltab::gpu::Device::Cpu;
+    let cpu_device = voltab::render::gpu::Device::Cpu;
     match cmd {
         Command::Run { pipeline, out, jobs, json, scene, device } => {
             let p = planned(load(&pipeline)?, &scene, json)?;
@@ -496,7 +496,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             let base = base_dir(&p);
             // The device is opened only when a stage can use it, and the choice is said once.
             let device = if p.stages().iter().any(|s| s.def().uses_device()) {
-                let (d, message) = voltab::gpu::select(device).map_err(|e| anyhow::anyhow!(e))?;
+                let (d, message) = voltab::render::gpu::select(device).map_err(|e| anyhow::anyhow!(e))?;
                 eprintln!("{message}");
                 d
             } else {
@@ -680,8 +680,8 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
         } => {
             let mut rows = Vec::new();
             if gpu {
-                let (device, message) =
-                    voltab::gpu::select(voltab::gpu::DeviceRequest::Gpu).map_err(|e| anyhow::anyhow!(e))?;
+                let (device, message) = voltab::render::gpu::select(voltab::render::gpu::DeviceRequest::Gpu)
+                    .map_err(|e| anyhow::anyhow!(e))?;
                 eprintln!("{message}");
                 if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
                     let base = base_dir(&p);

@@ -74,8 +74,8 @@ pub fn rows() -> Vec<Row> {
     v.extend(crate::tables::zh_response::stability_rows());
     v.extend(crate::tables::ms_lobes::stability_rows());
     v.extend(crate::tables::pop_preset::stability_rows());
-    v.extend(crate::effects::pop::radial::stability_rows());
-    v.extend(crate::effects::image_fog::medium::stability_rows());
-    v.extend(crate::effects::translucent::render::stability_rows());
+    v.extend(crate::stages::pop::radial::stability_rows());
+    v.extend(crate::stages::image_fog::medium::stability_rows());
+    v.extend(crate::stages::translucent::render::stability_rows());
     v
 }

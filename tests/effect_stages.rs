@@ -131,7 +131,7 @@ fn effect_stage_errors_name_the_field_or_the_file() {
 /// `distance_exr` give the same fogged image as the run that rendered them.
 #[test]
 fn image_fog_accepts_buffers_from_another_renderer() {
-    use voltab::effects::{ViewCamera, gbuffer};
+    use voltab::render::{ViewCamera, gbuffer};
     let d = tempdir();
     let outdoor = scene("outdoor.gltf");
     let run = |name: &str, extra: &str| {

@@ -575,9 +575,9 @@ fn pop_lacks(sc: &Scene) -> Option<&'static str> {
 /// point or sphere light.
 fn translucent_lacks(sc: &Scene, t: &crate::stages::translucent::TranslucentRender) -> Option<&'static str> {
     let bvh = crate::scene::bvh::SceneBvh::build(sc);
-    if crate::effects::translucent::find_object(sc, &bvh).is_none() {
+    if crate::stages::translucent::find_object(sc, &bvh).is_none() {
         Some("closed dielectric mesh bounding a medium")
-    } else if crate::effects::translucent::emitters(sc, t.light_radius).0.is_empty() {
+    } else if crate::stages::translucent::emitters(sc, t.light_radius).0.is_empty() {
         Some("point or sphere light")
     } else {
         None
@@ -691,9 +691,9 @@ impl Plan {
                     },
                 },
                 StageDef::EpipolarShadows(e) => effect_stage(s, "god rays", &e.scene, p, scenes, |sc| {
-                    if crate::effects::epipolar::EpiLight::from_scene(sc).is_none() {
+                    if crate::stages::god_rays::EpiLight::from_scene(sc).is_none() {
                         Some("directional or spot light")
-                    } else if crate::effects::epipolar::EpiMedium::from_scene(sc).is_none() {
+                    } else if crate::stages::god_rays::EpiMedium::from_scene(sc).is_none() {
                         Some("homogeneous global medium")
                     } else {
                         None
@@ -727,7 +727,7 @@ impl Plan {
                     effect_stage(s, "principal-ordinates propagation", &r.scene, p, scenes, pop_lacks)
                 }
                 StageDef::ImageFog(f) => effect_stage(s, "image-space fog", &f.scene, p, scenes, |sc| {
-                    crate::effects::image_fog::FogMedium::from_scene(sc).is_none().then_some("global medium")
+                    crate::stages::image_fog::FogMedium::from_scene(sc).is_none().then_some("global medium")
                 }),
                 StageDef::PlotPhase(pp) => {
                     let table = tables.iter().find(|t| t.id == pp.table);

@@ -66,7 +66,7 @@ pub struct StageContext<'a> {
     pub progress: bool,
     /// Where the real-time effects (`PopRender`, `EpipolarShadows`, `ImageFog`) run; the other
     /// stages ignore it.
-    pub device: &'a crate::gpu::Device,
+    pub device: &'a crate::render::gpu::Device,
 }
 
 /// What a stage wrote.
@@ -265,7 +265,7 @@ pub(crate) fn device_run<T>(
     id: &str,
     ctx: &StageContext,
     effect: &str,
-    result: Result<(T, Vec<crate::gpu::PassTime>), crate::gpu::GpuError>,
+    result: Result<(T, Vec<crate::render::gpu::PassTime>), crate::render::gpu::GpuError>,
     cpu: impl FnOnce() -> T,
 ) -> Result<DeviceRun<T>, StageError> {
     match result {
@@ -276,7 +276,7 @@ pub(crate) fn device_run<T>(
                 .collect();
             Ok((out, ctx.device.name(), phases, None))
         }
-        Err(crate::gpu::GpuError::Limit(why)) => {
+        Err(crate::render::gpu::GpuError::Limit(why)) => {
             Ok((cpu(), "cpu", Vec::new(), Some(format!("GPU selected but the CPU path ran: {why}"))))
         }
         Err(e) => Err(StageError::Input {

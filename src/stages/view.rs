@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::{StageContext, StageError};
-use crate::effects::gbuffer::{self, ColourOptions, GBuffer};
-use crate::effects::{RgbImage, ViewCamera};
+use crate::render::gbuffer::{self, ColourOptions, GBuffer};
+use crate::render::{RgbImage, ViewCamera};
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
 use crate::tables::FieldIssue;
@@ -260,7 +260,7 @@ pub fn path_trace(
         var += e.1.iter().map(|x| x * x).sum::<f64>();
         sq += e.0.iter().map(|x| x * x).sum::<f64>();
     }
-    let img = crate::effects::Image {
+    let img = crate::render::Image {
         width: cam.width,
         height: cam.height,
         data: est.iter().map(|e| e.0.map(|c| if c.is_finite() { c as f32 } else { 0.0 })).collect(),

@@ -7,13 +7,13 @@ use rayon::prelude::*;
 
 use super::grid::{Voxels, rotate};
 use super::{CameraOptions, ReferenceImage, Walk, light_dir, roulette, seed_hash, walks};
-use crate::effects::ViewCamera;
-use crate::effects::pop::environment::{EnvMap, EnvSampler};
-use crate::effects::pop::grid::Rgb;
-use crate::effects::pop::grid::{NoOccluder, Occluder};
-use crate::effects::pop::medium::{DirectionalLight, VoxelMedium};
 use crate::physics::hg::{phase, sample_mu};
 use crate::physics::rng::{Draws, SampleStream, StreamKey};
+use crate::render::ViewCamera;
+use crate::stages::pop::environment::{EnvMap, EnvSampler};
+use crate::stages::pop::grid::Rgb;
+use crate::stages::pop::grid::{NoOccluder, Occluder};
+use crate::stages::pop::medium::{DirectionalLight, VoxelMedium};
 
 /// One pixel's result.
 struct Pixel {

@@ -6,7 +6,7 @@
 //! - a [`TallySpec`] → ([`light_trace`]) a [`RadianceTally`]: per cell of a uniform tally grid over
 //!   the box the fluence `∫ L dω` \[W/m²\], its uncollided part, and the radiance averaged over
 //!   polar bins of the angle to an axis \[W/(m²·sr)\], each with a standard error; or
-//! - a [`ViewCamera`](crate::effects::ViewCamera) → ([`render`]) a [`ReferenceImage`]: per pixel the radiance reaching the eye
+//! - a [`ViewCamera`](crate::render::ViewCamera) → ([`render`]) a [`ReferenceImage`]: per pixel the radiance reaching the eye
 //!   \[W/(m²·sr)\] with the variance of its mean, its once-scattered part, and the exact
 //!   transmittance of the box along the pixel-centre ray.
 //!
@@ -54,7 +54,7 @@
 //! number is bit-identical for any rayon thread count.
 //!
 //! **Camera paths** ([`render`]). One pinhole ray through each pixel *centre*
-//! ([`ViewCamera::pixel_dir`](crate::effects::ViewCamera::pixel_dir); no jitter, so [`ReferenceImage::transmittance`] is the exact
+//! ([`ViewCamera::pixel_dir`](crate::render::ViewCamera::pixel_dir); no jitter, so [`ReferenceImage::transmittance`] is the exact
 //! transmittance along it). Each sample traces the ray into the box (black background; the
 //! delta light is never seen directly), samples a collision ∝ `σ_t·T`, and at every collision does
 //! next-event estimation toward the light:
@@ -69,8 +69,8 @@
 //! count.
 //!
 //! **Environment** ([`render_environment`]). The same camera paths lit by an
-//! [`EnvMap`](crate::effects::pop::environment::EnvMap) instead of a directional light, with the opaque
-//! surfaces of an [`Occluder`](crate::effects::pop::grid::Occluder) (black: a path that reaches one
+//! [`EnvMap`](crate::stages::pop::environment::EnvMap) instead of a directional light, with the opaque
+//! surfaces of an [`Occluder`](crate::stages::pop::grid::Occluder) (black: a path that reaches one
 //! ends; the eye ray ends at the G-buffer's surface distance). Next-event estimation draws a direction
 //! `w` from the map's importance sampler (density `p(w)` per steradian, positive everywhere) and adds
 //! `β·(σ_s/σ_t)·f_hg(w·ω_path)·L(w)·V(w)·exp(−σ_t ∫ density ds)/p(w)`, `V` the occluder's visibility.
@@ -107,7 +107,7 @@ use glam::DVec3;
 pub use camera::{render, render_environment};
 pub use light::light_trace;
 
-use crate::effects::pop::medium::{DirectionalLight, VoxelMedium};
+use crate::stages::pop::medium::{DirectionalLight, VoxelMedium};
 
 /// The tally grid and polar bins of [`light_trace`].
 #[derive(Debug, Clone, Copy, PartialEq)]

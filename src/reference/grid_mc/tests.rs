@@ -7,8 +7,8 @@ use std::f64::consts::{PI, TAU};
 use glam::DVec3;
 
 use super::*;
-use crate::effects::ViewCamera;
 use crate::physics::hg::{cdf, phase, sample_mu};
+use crate::render::ViewCamera;
 
 fn cube(s: [f64; 3], a: [f64; 3], g: [f64; 3]) -> VoxelMedium {
     VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, (s, a, g)).unwrap()

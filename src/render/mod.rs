@@ -1,0 +1,198 @@
+//! Screen-space real-time effects and the image types they share.
+//!
+//! **Input → output.** Per-pixel buffers of a camera view (an HDR colour image, the distance along each
+//! pixel's view ray) plus a light and a medium → an image with the effect applied. The buffers come from
+//! voltab's own ray tracer ([`gbuffer`]) so the effects run on any imported scene, or from EXR files of
+//! another renderer.
+//!
+//! - [`epipolar`]: baran2010, shadowed single scattering (god rays) by epipolar rectification and
+//!   partial-sum trees, with brute-force ray-marching references.
+//! - [`image_fog`]: iser2018, analytic quasi-heterogeneous fog with hierarchical image-space filtering
+//!   of multiple scattering, with the gathering-filter reference.
+//!
+//! Conventions shared by every effect: pixel `(x, y)` has its centre at `(x + ½, y + ½)`, `y` grows
+//! downwards, images are row-major (`data[y · width + x]`), distances are metres along the unit view ray
+//! (`f32::INFINITY` for sky pixels), colours are linear RGB radiance \[W/(m²·sr)\].
+
+pub mod gbuffer;
+pub mod gpu;
+
+use glam::DVec3;
+
+/// A row-major image of `T`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image<T> {
+    /// Pixels per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// `width · height` pixels, row-major.
+    pub data: Vec<T>,
+}
+
+impl<T: Clone> Image<T> {
+    /// An image filled with `value`.
+    pub fn filled(width: usize, height: usize, value: T) -> Self {
+        Image { width, height, data: vec![value; width * height] }
+    }
+}
+
+impl<T: Copy> Image<T> {
+    /// Pixel `(x, y)`; panics when out of range (callers iterate over the image's own size).
+    pub fn at(&self, x: usize, y: usize) -> T {
+        self.data[y * self.width + x]
+    }
+}
+
+/// Linear RGB radiance image.
+pub type RgbImage = Image<[f32; 3]>;
+/// Distance along each pixel's unit view ray \[m\] (`f32::INFINITY` where the ray hits nothing).
+pub type DistanceImage = Image<f32>;
+
+/// A pinhole camera with an image raster: maps pixels to world-space rays and back.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewCamera {
+    /// Eye position \[m\].
+    pub position: DVec3,
+    /// Unit viewing direction.
+    pub forward: DVec3,
+    /// Unit vector to the right of the image.
+    pub right: DVec3,
+    /// Unit vector to the top of the image.
+    pub up: DVec3,
+    /// `tan(yfov / 2)`.
+    pub tan_half_y: f64,
+    /// Pixels per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+}
+
+impl ViewCamera {
+    /// A camera at `position` looking along `forward` with `up` as the image's upward hint, vertical
+    /// field of view `yfov` \[rad\]. `None` when the vectors are degenerate (zero, parallel, non-finite),
+    /// `yfov ∉ (0, π)` or the raster is empty.
+    pub fn new(
+        position: [f64; 3],
+        forward: [f64; 3],
+        up: [f64; 3],
+        yfov: f64,
+        width: usize,
+        height: usize,
+    ) -> Option<Self> {
+        let p = DVec3::from_array(position);
+        let f = DVec3::from_array(forward).try_normalize()?;
+        let r = f.cross(DVec3::from_array(up)).try_normalize()?;
+        let u = r.cross(f);
+        if !(p.is_finite() && yfov > 0.0 && yfov < std::f64::consts::PI) || width == 0 || height == 0 {
+            return None;
+        }
+        Some(ViewCamera { position: p, forward: f, right: r, up: u, tan_half_y: (0.5 * yfov).tan(), width, height })
+    }
+
+    /// A camera from a scene camera (perspective only; the raster's aspect ratio is `width / height`).
+    pub fn from_scene(camera: &crate::scene::Camera, width: usize, height: usize) -> Option<Self> {
+        match camera.projection {
+            crate::scene::Projection::Perspective { yfov, .. } => {
+                Self::new(camera.position, camera.forward, camera.up, yfov, width, height)
+            }
+            crate::scene::Projection::Orthographic { .. } => None,
+        }
+    }
+
+    /// `width / height`.
+    pub fn aspect(&self) -> f64 {
+        self.width as f64 / self.height as f64
+    }
+
+    /// Unit world-space direction through raster position `(x, y)` (pixel units, `y` down; pixel
+    /// centres at half-integers).
+    pub fn ray_dir(&self, x: f64, y: f64) -> DVec3 {
+        let sx = (2.0 * x / self.width as f64 - 1.0) * self.tan_half_y * self.aspect();
+        let sy = (1.0 - 2.0 * y / self.height as f64) * self.tan_half_y;
+        (self.forward + sx * self.right + sy * self.up).normalize()
+    }
+
+    /// Unit direction through the centre of pixel `(x, y)`.
+    pub fn pixel_dir(&self, x: usize, y: usize) -> DVec3 {
+        self.ray_dir(x as f64 + 0.5, y as f64 + 0.5)
+    }
+
+    /// Raster position of the direction `d` seen from the eye (its vanishing point), and whether it
+    /// lies in front of the camera (`⟨d, forward⟩ > 0`). `None` when `d` is perpendicular to the view
+    /// axis (the point is at infinity on the image plane). Used for epipoles of lights.
+    pub fn project_dir(&self, d: DVec3) -> Option<([f64; 2], bool)> {
+        let z = d.dot(self.forward);
+        if z.abs() < 1e-12 * d.length() || !d.is_finite() {
+            return None;
+        }
+        let sx = d.dot(self.right) / z / (self.tan_half_y * self.aspect());
+        let sy = d.dot(self.up) / z / self.tan_half_y;
+        Some(([(sx + 1.0) * 0.5 * self.width as f64, (1.0 - sy) * 0.5 * self.height as f64], z > 0.0))
+    }
+
+    /// Raster position of world point `p` and whether it lies in front of the eye; `None` when `p` is on
+    /// the eye's plane.
+    pub fn project_point(&self, p: DVec3) -> Option<([f64; 2], bool)> {
+        self.project_dir(p - self.position)
+    }
+}
+
+/// Relative RMSE of `img` against `reference` over pixels and channels (`sqrt(Σ(x−r)²)/sqrt(Σr²)`); `∞` for
+/// mismatching sizes, 0 when both are zero.
+pub fn rel_rmse(img: &RgbImage, reference: &RgbImage) -> f64 {
+    if img.data.len() != reference.data.len() {
+        return f64::INFINITY;
+    }
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for (a, r) in img.data.iter().zip(&reference.data) {
+        for c in 0..3 {
+            let (x, y) = (f64::from(a[c]), f64::from(r[c]));
+            num += (x - y) * (x - y);
+            den += y * y;
+        }
+    }
+    if den > 0.0 {
+        (num / den).sqrt()
+    } else if num > 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixel_rays_project_back_to_their_pixels() {
+        let cam = ViewCamera::new([1.0, 2.0, 3.0], [0.3, -0.2, -1.0], [0.0, 1.0, 0.0], 0.9, 64, 48).unwrap();
+        for &(x, y) in &[(0.5, 0.5), (63.5, 47.5), (20.25, 31.75)] {
+            let d = cam.ray_dir(x, y);
+            assert!((d.length() - 1.0).abs() < 1e-12);
+            let (q, front) = cam.project_dir(d).unwrap();
+            assert!(front);
+            assert!((q[0] - x).abs() < 1e-9 && (q[1] - y).abs() < 1e-9, "{q:?} vs ({x}, {y})");
+            let (q2, _) = cam.project_point(cam.position + 7.0 * d).unwrap();
+            assert!((q2[0] - x).abs() < 1e-9 && (q2[1] - y).abs() < 1e-9);
+        }
+        // The image centre looks along `forward`; the top edge is yfov/2 above it.
+        let c = cam.ray_dir(32.0, 24.0);
+        assert!((c - cam.forward).length() < 1e-12);
+        let top = cam.ray_dir(32.0, 0.0);
+        assert!((top.dot(cam.forward).acos() - 0.45).abs() < 1e-12);
+        // A direction behind the camera projects with `front = false`; one across the view axis not at all.
+        assert!(!cam.project_dir(-cam.forward).unwrap().1);
+        assert!(cam.project_dir(cam.right).is_none());
+    }
+
+    #[test]
+    fn degenerate_cameras_are_rejected() {
+        assert!(ViewCamera::new([0.0; 3], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 1.0, 8, 8).is_none());
+        assert!(ViewCamera::new([0.0; 3], [0.0, 1.0, 0.0], [0.0, 2.0, 0.0], 1.0, 8, 8).is_none());
+        assert!(ViewCamera::new([0.0; 3], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 0.0, 8, 8).is_none());
+        assert!(ViewCamera::new([f64::NAN, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 1.0, 8, 8).is_none());
+        assert!(ViewCamera::new([0.0; 3], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 1.0, 0, 8).is_none());
+    }
+}

@@ -1,0 +1,462 @@
+//! baran2010: real-time shadowed single scattering ("god rays") in a homogeneous medium by epipolar
+//! rectification and partial-sum trees, with brute-force ray-marching references.
+//!
+//! **Input → output.** A camera [`DistanceImage`] (from [`crate::render::gbuffer::distance_image`]),
+//! a light [`ShadowMap`] ([`render_shadow_map`]), an [`EpiLight`] (directional or spot, optionally
+//! textured), a homogeneous [`EpiMedium`] and [`EpipolarOptions`] → per pixel the single-scattered
+//! in-scatter and the view transmittance ([`render`] → [`EpipolarOutput`]), composited over a colour
+//! image by [`composite`].
+//!
+//! Pipeline of [`render`] (paper sections in brackets):
+//! 1. [`rectify`]: epipole, slice distribution `x(α) = h·sinh(α)` per exit edge (Sec. 8, half-pixel
+//!    bound), per slice the view-ray angles `β` and the rectified depth `D[β]` as a light-ray coordinate
+//!    `γ` (Sec. 3; Sec. 9 for spot lights).
+//! 2. [`factor`]: the visibility-free integrand `I(γ, β)` sampled on a grid and factorised by a Jacobi
+//!    SVD into `N` terms `Γ_i(γ)·B_i(β)` (Sec. 6), shared by all slices.
+//! 3. [`integrate`]: per slice, the shadow map rectified into blocker angles `S[γ]` with depth modes
+//!    (Sec. 7), then the incremental sweep over `β` with a Fenwick half tree of `N`-vectors (Sec. 4–5).
+//! 4. unrectification back to pixels (bilinear in slice angle and `β`, restricted to samples whose
+//!    rectified depth matches the pixel's — a joint-bilateral rule the paper leaves to Engelhardt and
+//!    Dachsbacher 2010), and ray marching ([`reference`](mod@reference)'s shadow-map marcher) in the ring around the
+//!    epipole (Sec. 6) and at the few silhouette pixels no sample matches.
+//!
+//! **Conventions** (shared with the references, so all methods integrate the same quantity):
+//! - Single scattering `L = ∫₀^d e^{−σ_t s} σ_s p(μ) L_in(x(s)) V(x(s)) ds` per channel, `p` the HG
+//!   phase with `μ` the cosine between the light's propagation direction and the direction to the eye.
+//! - Directional light: `L_in = E · texture`, not attenuated on its way to `x` (the irradiance `E` is
+//!   the value at the scattering point). Spot light: `L_in = I · falloff · texture · e^{−σ_t r} / r²`
+//!   with `r` the distance to the light and the KHR falloff `clamp((cos θ − cos θ_o)/(cos θ_i −
+//!   cos θ_o), 0, 1)²`.
+//! - The medium fills space; a view ray ends at its depth, and a ray that hits nothing ends where it
+//!   leaves the scene bounds (the box the shadow map was fitted to, [`view_extent`]).
+//! - Visibility `V` comes from the shadow map (nearest texel, depth bias [`ShadowMap::bias`]) for
+//!   [`render`] and [`march_shadow_map`]; [`march_bvh`] casts real shadow rays.
+//! - Per-channel `σ`: when `σ_t` is the same in all channels one kernel is factorised and `σ_s,c·E_c`
+//!   scales the result per channel; otherwise each channel has its own factorised kernel and the tree
+//!   stores `3·N`-vectors (the same holds for a textured light, whose colour multiplies `Γ_i`).
+//! - Results are clamped to be finite and non-negative (a truncated SVD can undershoot slightly where
+//!   the integrand is near zero); transmittance underflows to 0 for very dense fog, never to NaN.
+
+mod stage;
+pub use stage::*;
+#[cfg(feature = "gpu")]
+pub mod gpu;
+#[cfg(feature = "gpu")]
+pub mod shaders;
+
+pub mod bench;
+pub mod factor;
+pub mod integrate;
+pub mod rectify;
+pub mod reference;
+pub mod shadow_map;
+pub mod tree;
+
+#[cfg(test)]
+pub(crate) mod tests;
+
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::render::{DistanceImage, Image, RgbImage, ViewCamera};
+use crate::scene::{Boundary, Density, LightKind, Scene};
+
+pub use bench::{BenchReport, ErrorTimePoint, bench, error_vs_time, write_error_plot};
+pub use reference::{march_bvh, march_shadow_map};
+pub use shadow_map::{LightFrame, ShadowMap, render_shadow_map};
+
+/// A light for the epipolar effect (world space, metres, unit directions).
+#[derive(Debug, Clone, PartialEq)]
+pub enum EpiLight {
+    /// Distant light.
+    Directional {
+        /// Unit direction the light travels to.
+        direction: [f64; 3],
+        /// Irradiance \[W/m²\] on a surface facing the light, per channel.
+        irradiance: [f64; 3],
+        /// Optional colour texture projected along the light over the shadow map's window
+        /// (orthographic; `u` along [`LightFrame`]'s first axis, `v` along its second).
+        texture: Option<RgbImage>,
+    },
+    /// Spot light with the KHR cone falloff.
+    Spot {
+        /// Position \[m\].
+        position: [f64; 3],
+        /// Unit direction the cone points to.
+        direction: [f64; 3],
+        /// Full-intensity half-angle \[rad\].
+        inner_cone: f64,
+        /// Cut-off half-angle \[rad\] (clamped to 80° for the shadow map's frustum).
+        outer_cone: f64,
+        /// On-axis intensity \[W/sr\] per channel.
+        intensity: [f64; 3],
+        /// Optional colour texture projected through the cone's square frustum.
+        texture: Option<RgbImage>,
+    },
+}
+
+impl EpiLight {
+    /// The first directional or spot light of `scene` (untextured), `None` when it has neither or its
+    /// direction is degenerate.
+    pub fn from_scene(scene: &Scene) -> Option<EpiLight> {
+        scene.lights.iter().find_map(|l| match &l.kind {
+            LightKind::Directional { direction, .. } => {
+                let d = DVec3::from_array(*direction).try_normalize()?;
+                Some(EpiLight::Directional { direction: d.to_array(), irradiance: l.radiance, texture: None })
+            }
+            LightKind::Spot { position, direction, inner_cone, outer_cone } => {
+                let d = DVec3::from_array(*direction).try_normalize()?;
+                Some(EpiLight::Spot {
+                    position: *position,
+                    direction: d.to_array(),
+                    inner_cone: *inner_cone,
+                    outer_cone: *outer_cone,
+                    intensity: l.radiance,
+                    texture: None,
+                })
+            }
+            _ => None,
+        })
+    }
+
+    /// The light's texture, if any.
+    pub fn texture(&self) -> Option<&RgbImage> {
+        match self {
+            EpiLight::Directional { texture, .. } | EpiLight::Spot { texture, .. } => texture.as_ref(),
+        }
+    }
+
+    /// Per-channel strength: irradiance (directional) or intensity (spot).
+    pub fn strength(&self) -> [f64; 3] {
+        match self {
+            EpiLight::Directional { irradiance, .. } => *irradiance,
+            EpiLight::Spot { intensity, .. } => *intensity,
+        }
+    }
+
+    /// KHR spot falloff of the unit direction `w` from the light (1 for a directional light).
+    pub fn falloff(&self, w: DVec3) -> f64 {
+        match self {
+            EpiLight::Directional { .. } => 1.0,
+            EpiLight::Spot { direction, inner_cone, outer_cone, .. } => {
+                let (ci, co) = (inner_cone.cos(), outer_cone.cos());
+                let t = ((w.dot(DVec3::from_array(*direction)) - co) / (ci - co).max(1e-6)).clamp(0.0, 1.0);
+                t * t
+            }
+        }
+    }
+}
+
+/// A homogeneous medium with an HG phase function.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EpiMedium {
+    /// Scattering coefficient \[1/m\] per channel.
+    pub sigma_s: [f64; 3],
+    /// Absorption coefficient \[1/m\] per channel.
+    pub sigma_a: [f64; 3],
+    /// HG mean cosine (one value for all channels: the factorisation shares `β` across channels).
+    pub g: f64,
+}
+
+impl EpiMedium {
+    /// The first homogeneous global medium of `scene` (its `g` is the channel mean), `None` if none.
+    pub fn from_scene(scene: &Scene) -> Option<EpiMedium> {
+        scene
+            .media
+            .iter()
+            .find(|m| m.boundary == Boundary::Global && m.density == Density::Homogeneous)
+            .map(|m| EpiMedium { sigma_s: m.sigma_s, sigma_a: m.sigma_a, g: (m.g[0] + m.g[1] + m.g[2]) / 3.0 })
+    }
+
+    /// Extinction per channel (negative or NaN inputs count as 0).
+    pub fn sigma_t(&self) -> [f64; 3] {
+        [0, 1, 2].map(|c| clean(self.sigma_s[c]) + clean(self.sigma_a[c]))
+    }
+
+    /// Scattering per channel (negative or NaN inputs count as 0).
+    pub fn sigma_s_clean(&self) -> [f64; 3] {
+        self.sigma_s.map(clean)
+    }
+
+    /// HG phase for cosine `mu` (g clamped to ±0.999).
+    pub fn phase(&self, mu: f64) -> f64 {
+        let g = if self.g.is_finite() { self.g.clamp(-0.999, 0.999) } else { 0.0 };
+        crate::physics::hg::phase(mu, g)
+    }
+}
+
+fn clean(x: f64) -> f64 {
+    if x.is_finite() && x > 0.0 { x } else { 0.0 }
+}
+
+/// Knobs of [`render`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EpipolarOptions {
+    /// Slice density relative to the half-pixel bound of Sec. 8 (1 = adjacent slices one pixel apart
+    /// at the screen edge they leave through; larger is denser).
+    pub slice_density: f64,
+    /// View-ray samples `β` per pixel of epipolar line.
+    pub samples_per_pixel: f64,
+    /// Light-ray bins `d` along `γ` (the integration grid; paper: 2048–4096).
+    pub gamma_bins: usize,
+    /// SVD rank `N` (Sec. 6; paper: 4).
+    pub rank: usize,
+    /// Largest number of depth modes per `γ` bin (Sec. 7). 1 disables prefiltering (one blocker
+    /// sample per bin); otherwise 4 sub-samples per bin are clustered into at most this many modes.
+    pub depth_modes: usize,
+    /// Radius \[px\] of the disc around the epipole that is ray marched; `None`: 2° of view angle.
+    pub ring_px: Option<f64>,
+    /// Steps per ray of the ring march.
+    pub ring_steps: usize,
+}
+
+impl Default for EpipolarOptions {
+    fn default() -> Self {
+        EpipolarOptions {
+            slice_density: 1.0,
+            samples_per_pixel: 1.0,
+            gamma_bins: 2048,
+            rank: 4,
+            depth_modes: 4,
+            ring_px: None,
+            ring_steps: 128,
+        }
+    }
+}
+
+/// Timings and sizes of one [`render`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EpipolarStats {
+    /// Slice layout, rectified depth map \[ms\].
+    pub rectify_ms: f64,
+    /// SVD factorisation of `I(γ, β)` \[ms\].
+    pub factorize_ms: f64,
+    /// Shadow-map rectification and depth modes (share of the per-slice stage's wall time) \[ms\].
+    pub prefilter_ms: f64,
+    /// Tree build and sweep (share of the per-slice stage's wall time) \[ms\].
+    pub integrate_ms: f64,
+    /// Ray marching around the epipole and at unmatched silhouette pixels \[ms\].
+    pub ring_ms: f64,
+    /// Unrectification and transmittance \[ms\].
+    pub unrectify_ms: f64,
+    /// Wall time of the whole call \[ms\].
+    pub total_ms: f64,
+    /// Epipolar slices.
+    pub slices: usize,
+    /// `β` samples over all slices.
+    pub samples: usize,
+    /// Pixels ray marched in the ring.
+    pub ring_pixels: usize,
+    /// Pixels outside the ring ray marched because no slice sample near them has a matching depth
+    /// (silhouettes thinner than the slice spacing).
+    pub edge_pixels: usize,
+    /// Ratio of the `N+1`-th to the first singular value (0 when the rank is complete): how much the
+    /// truncation leaves out.
+    pub svd_residual: f64,
+}
+
+/// What [`render`] returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpipolarOutput {
+    /// In-scattered radiance per pixel.
+    pub inscatter: RgbImage,
+    /// Per-pixel view transmittance `exp(−σ_t d)` over the view extent `d`.
+    pub transmittance: RgbImage,
+    /// Timings and sizes.
+    pub stats: EpipolarStats,
+}
+
+/// Length of the medium segment of a view ray: its depth, or for a ray that hits nothing the distance
+/// at which it leaves `bounds` (0 if it never is inside them).
+pub fn view_extent(origin: DVec3, dir: DVec3, depth: f32, bounds: ([f64; 3], [f64; 3])) -> f64 {
+    let d = f64::from(depth);
+    if d.is_finite() {
+        return d.max(0.0);
+    }
+    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+    for a in 0..3 {
+        let (o, v) = (origin[a], dir[a]);
+        if v.abs() < 1e-300 {
+            if o < bounds.0[a] || o > bounds.1[a] {
+                return 0.0;
+            }
+            continue;
+        }
+        let (ta, tb) = ((bounds.0[a] - o) / v, (bounds.1[a] - o) / v);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+    }
+    if t1 > t0 && t1.is_finite() { t1 } else { 0.0 }
+}
+
+/// `∫_a^b e^{−σ t} dt` without cancellation, for `σ ≥ 0` (`b − a` at `σ = 0`).
+pub(crate) fn exp_integral(sigma: f64, a: f64, b: f64) -> f64 {
+    let w = b - a;
+    if w <= 0.0 {
+        return 0.0;
+    }
+    let x = sigma * w;
+    if x < 1e-12 {
+        return (-sigma * a).exp() * w;
+    }
+    (-sigma * a).exp() * (-(-x).exp_m1()) / sigma
+}
+
+/// Nearest-texel lookup of `tex` at `uv ∈ [0, 1]²` (`v` down), clamped to the edges; white when
+/// there is no texture or it is empty.
+pub(crate) fn sample_texture(tex: Option<&RgbImage>, uv: [f64; 2]) -> [f64; 3] {
+    let Some(t) = tex.filter(|t| t.width > 0 && t.height > 0) else { return [1.0; 3] };
+    let x = ((uv[0] * t.width as f64).floor().max(0.0) as usize).min(t.width - 1);
+    let y = ((uv[1] * t.height as f64).floor().max(0.0) as usize).min(t.height - 1);
+    t.at(x, y).map(|c| if c.is_finite() && c > 0.0 { f64::from(c) } else { 0.0 })
+}
+
+/// Per-channel light modulation at `p`: texture (sampled at the frame's window coordinates) times the
+/// spot falloff; 0 behind a spot light, 1 for an untextured directional light.
+pub(crate) fn modulation(light: &EpiLight, frame: &LightFrame, p: DVec3) -> [f64; 3] {
+    let fall = match light {
+        EpiLight::Directional { .. } => 1.0,
+        EpiLight::Spot { position, .. } => match (p - DVec3::from_array(*position)).try_normalize() {
+            Some(w) => light.falloff(w),
+            None => return [0.0; 3],
+        },
+    };
+    if fall <= 0.0 {
+        return [0.0; 3];
+    }
+    match light.texture() {
+        None => [fall; 3],
+        Some(t) => match frame.uv(p) {
+            Some(uv) => sample_texture(Some(t), uv).map(|c| c * fall),
+            None => [0.0; 3],
+        },
+    }
+}
+
+/// Renders the in-scatter and transmittance of `medium` lit by `light` (visibility from `shadow`) for
+/// every pixel of `cam`, on the current rayon pool. Deterministic: bit-identical for any thread count.
+/// `depth` must have the camera's raster size (a mismatching image is read with clamped indices).
+pub fn render(
+    cam: &ViewCamera,
+    depth: &DistanceImage,
+    light: &EpiLight,
+    shadow: &ShadowMap,
+    medium: &EpiMedium,
+    opts: &EpipolarOptions,
+) -> EpipolarOutput {
+    let start = Instant::now();
+    let mut stats = EpipolarStats::default();
+    let (w, h) = (cam.width, cam.height);
+
+    // 1. Slices and rectified depth.
+    let t0 = Instant::now();
+    let setup = rectify::Setup::new(cam, depth, light, shadow, opts);
+    stats.rectify_ms = ms(t0);
+    stats.slices = setup.slices.len();
+    stats.samples = setup.slices.iter().map(|s| s.betas.len()).sum();
+
+    // 2. Factorisation of I(γ, β).
+    let t1 = Instant::now();
+    let fac = factor::Factorization::new(&setup, medium, opts);
+    stats.factorize_ms = ms(t1);
+    stats.svd_residual = fac.residual;
+
+    // 3. Per slice: rectified shadow map, depth modes, tree sweep.
+    let t2 = Instant::now();
+    let per_slice: Vec<integrate::SliceResult> = setup
+        .slices
+        .par_iter()
+        .map(|s| integrate::integrate_slice(&setup, &fac, s, light, shadow, medium, opts))
+        .collect();
+    let wall = ms(t2);
+    let (pre, int): (f64, f64) =
+        per_slice.iter().fold((0.0, 0.0), |(a, b), r| (a + r.prefilter_ns as f64, b + r.integrate_ns as f64));
+    let frac = if pre + int > 0.0 { pre / (pre + int) } else { 0.5 };
+    stats.prefilter_ms = wall * frac;
+    stats.integrate_ms = wall * (1.0 - frac);
+
+    // 4. Unrectify; pixels in the ring or without a depth-matching sample are ray marched.
+    let t3 = Instant::now();
+    let sigma_t = medium.sigma_t();
+    let grey = sigma_t[0] == sigma_t[1] && sigma_t[1] == sigma_t[2];
+    let rows: Vec<UnrectifiedRow> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let (mut row, mut trow, mut march) = (vec![[0.0f32; 3]; w], vec![[1.0f32; 3]; w], Vec::new());
+            for x in 0..w {
+                let v = cam.pixel_dir(x, y);
+                let d = view_extent(cam.position, v, depth_at(depth, x, y), shadow.bounds);
+                trow[x] =
+                    if grey { [(-sigma_t[0] * d).exp() as f32; 3] } else { sigma_t.map(|s| (-s * d).exp() as f32) };
+                let r = if setup.in_ring(x, y) { None } else { setup.unrectify(&per_slice, x, y, v, d, fac.dgamma) };
+                match r {
+                    Some(px) => row[x] = px,
+                    None => march.push(x),
+                }
+            }
+            (row, trow, march)
+        })
+        .collect();
+    let mut inscatter = Image::filled(w, h, [0.0f32; 3]);
+    let mut transmittance = Image::filled(w, h, [1.0f32; 3]);
+    let mut ring: Vec<(usize, usize)> = Vec::new();
+    for (y, (row, trow, march)) in rows.into_iter().enumerate() {
+        inscatter.data[y * w..(y + 1) * w].copy_from_slice(&row);
+        transmittance.data[y * w..(y + 1) * w].copy_from_slice(&trow);
+        ring.extend(march.into_iter().map(|x| (x, y)));
+    }
+    stats.unrectify_ms = ms(t3);
+
+    let t4 = Instant::now();
+    stats.ring_pixels = ring.iter().filter(|&&(x, y)| setup.in_ring(x, y)).count();
+    stats.edge_pixels = ring.len() - stats.ring_pixels;
+    let ctx = reference::MarchCtx {
+        cam,
+        depth,
+        light,
+        vis: reference::Visibility::ShadowMap(shadow),
+        medium,
+        bounds: shadow.bounds,
+        frame: &shadow.frame,
+        steps: opts.ring_steps,
+    };
+    let marched: Vec<[f32; 3]> = ring.par_iter().map(|&(x, y)| ctx.pixel(x, y)).collect();
+    for (&(x, y), v) in ring.iter().zip(marched) {
+        inscatter.data[y * w + x] = v;
+    }
+    stats.ring_ms = ms(t4);
+    stats.total_ms = ms(start);
+    EpipolarOutput { inscatter, transmittance, stats }
+}
+
+/// One row of unrectified in-scatter, its transmittance and the columns left for ray marching.
+type UnrectifiedRow = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<usize>);
+
+/// `colour · T + inscatter` per pixel and channel (images of equal size; extra pixels of a larger
+/// `colour` are ignored, missing ones read as black).
+pub fn composite(colour: &RgbImage, out: &EpipolarOutput) -> RgbImage {
+    let mut img = out.inscatter.clone();
+    for (i, px) in img.data.iter_mut().enumerate() {
+        let c = colour.data.get(i).copied().unwrap_or([0.0; 3]);
+        let t = out.transmittance.data[i];
+        for k in 0..3 {
+            let v = c[k] * t[k] + px[k];
+            px[k] = if v.is_finite() { v } else { 0.0 };
+        }
+    }
+    img
+}
+
+/// Depth of pixel `(x, y)` with clamped indices (`∞` for an empty image).
+pub(crate) fn depth_at(depth: &DistanceImage, x: usize, y: usize) -> f32 {
+    if depth.width == 0 || depth.height == 0 {
+        return f32::INFINITY;
+    }
+    depth.at(x.min(depth.width - 1), y.min(depth.height - 1))
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}

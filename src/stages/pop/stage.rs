@@ -1,0 +1,1435 @@
+//! `PopRender`: scene + `PopPreset` table (+ an environment map) → elek2014 Principal-Ordinates
+//! Propagation of the scene's global medium lit by its directional lights (Sec. 4), its point, spot and
+//! sphere lights (radial grids, Sec. 6), its area lights and the light its surfaces reflect (VPLs from
+//! the emitters and from reflective shadow maps, Sec. 6) and the environment's principal ordinates
+//! (Sec. 5), ray-marched
+//! into an EXR + PNG, with an optional comparison against brute-force volumetric path tracing.
+//!
+//! **Input.** A scene file (relative to the pipeline file) with a perspective camera, one global
+//! medium (homogeneous or exponential height fog; optionally multiplied by a raw `f32` or EXR-slice
+//! density volume spanning the scene's bounds), its lights and optionally an environment: the stage's
+//! latitude–longitude EXR `environment` map or, when that field is empty, the scene's USD `DomeLight`
+//! (its texture × intensity, rotated as the dome is; a uniform map without a texture; see
+//! [`environment::dome_map`]). When both are present the stage's map wins and `skipped` in
+//! `summary.json` says the dome was overridden; an unreadable dome texture is an error naming the USD
+//! file, the prim and the texture. The id of a compiled `PopPreset` table (grid, iterations, ε_L, ε_a,
+//! residuum switch, flow table). **Phases** (elek2014 Fig. 14 names, in
+//! `summary.json`): import → BVH → G-buffer → voxelisation → (environment: ordinates, Sec. 5.1) → per
+//! directional light or ordinate: grid and medium downsampling, initialisation (Sec. 4.1), propagation
+//! (Eqs. 2–8), isotropic residuum (Sec. 5.4, merged across the ordinates) → merge (Sec. 5.3) →
+//! ray marching with joint-bilateral upsampling (Sec. 4.4) → `<out>/<stage>/pop.exr` (layers
+//! `scattered`, `transmittance`, `colour`) with PNG previews and `summary.json`.
+//!
+//! **Check** (with `fig12_photons > 0`): elek2014 Fig. 12 with this stage's preset — the unit cube
+//! (`σ_s = 4`, albedo 1, a directional light, `g` = 0, 0.7, 0.96) propagated by POP and light traced by
+//! [`crate::reference::grid_mc`]: collided fluence and radiance distributions in the middle slice, and
+//! images of the cube against the camera path tracer (`fig12_g*.png`, `summary.json`). The scene itself
+//! is not path traced: voltab's path tracer fills space with the global medium without bound (so the
+//! sun reaches nothing inside a closed room), while POP, like the paper, confines the medium to the
+//! scene's bounds.
+
+use std::path::Path;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::render::{Image, RgbImage, ViewCamera};
+use crate::scene::bvh::SceneBvh;
+use crate::scene::{EnvironmentLight, Scene};
+use crate::stages::pop::environment::{self, EnvMap, EnvOrdinate, OrdinateSet};
+use crate::stages::pop::grid::Grid;
+use crate::stages::pop::merge;
+use crate::stages::pop::propagate::{self, FlowTable, Observer, PhaseTimes, Settings};
+use crate::stages::pop::radial::RadialGrid;
+use crate::stages::pop::radial_propagate;
+use crate::stages::pop::render::{self, MarchOptions};
+use crate::stages::pop::scene::{self as pop_scene, BvhOccluder, Environment, RawDensity, SceneMedia};
+use crate::stages::view::{self, ms};
+use crate::stages::{StageContext, StageError, StageOutcome};
+use crate::tables::FieldIssue;
+use crate::tables::pop_preset::PopPresetTable;
+
+crate::declare_params! {
+    /// Render a scene's global medium lit by its directional lights with elek2014's Principal-Ordinates
+    /// Propagation, using a `PopPreset` table.
+    raw PopRenderRaw => resolved PopRender, kind "PopRender" {
+        /// Scene file (.gltf, .glb, .usda, .usdc, .usd, .usdz), relative to the pipeline file.
+        scene: String = String::new(), unit = "", range = "path to a scene file";
+        /// Id of the `PopPreset` table (grid, iterations, thresholds, flow table).
+        table: String = String::new(), unit = "", range = "id of a PopPreset table in this pipeline";
+        /// Index of the scene camera to render.
+        camera: u32 = 0, unit = "", range = "0 to the scene's camera count - 1";
+        /// Image width.
+        width: u32 = 640, unit = "px", range = "1 to 8192";
+        /// Image height.
+        height: u32 = 480, unit = "px", range = "1 to 8192";
+        /// Paths per pixel of the vacuum colour buffer (direct light at the first hit).
+        colour_samples: u32 = 8, unit = "paths", range = "1 to 65536";
+        /// Voxels of the scene medium along the scene's longest axis (the medium volume POP samples).
+        voxels: u32 = 64, unit = "voxels", range = "1 to 1024";
+        /// Raw little-endian f32 density volume (x fastest) spanning the scene's bounds, relative to the
+        /// pipeline file, multiplying the medium's density; empty: none.
+        density_raw: String = String::new(), unit = "", range = "empty or path to a .raw file";
+        /// Folder of EXR images, one z slice of a density volume per file in file-name order (x = width,
+        /// y = height with row 0 at the top, channel `density`, `Y`, `R` or `A`), spanning the scene's
+        /// bounds and multiplying the medium's density, relative to the pipeline file; empty: none. Not
+        /// with `density_raw`.
+        density_slices: String = String::new(), unit = "", range = "empty or path to a folder of .exr slices";
+        /// Voxels of `density_raw` along x, y, z.
+        density_dims: [u32; 3] = [0, 0, 0], unit = "voxels", range = "each 1 to 1024 when density_raw is given";
+        /// VPLs per area light or emissive mesh (instant radiosity, elek2014 Sec. 6): Lambertian point
+        /// lights on radial grids, each an equal share of the emitter's area (rect and disk lights round
+        /// up to a square number); 0 skips area lights.
+        vpls: u32 = 4, unit = "VPLs per emitter", range = "0 to 256";
+        /// VPLs for the direct light the scene's surfaces reflect into the medium (instant radiosity from
+        /// reflective shadow maps of every light, elek2014 Sec. 6), placed over all maps in proportion
+        /// to the reflected flux; 0: surfaces only occlude.
+        surface_vpls: u32 = 32, unit = "VPLs", range = "0 to 1024";
+        /// Texels per side of each light's reflective shadow map (used when surface_vpls > 0).
+        rsm_size: u32 = 64, unit = "texels", range = "1 to 1024";
+        /// Latitude-longitude HDR environment map (EXR with R, G, B; row 0 up, centre column toward +Z)
+        /// lighting the medium through principal ordinates (elek2014 Sec. 5), relative to the pipeline
+        /// file; it overrides the scene's DomeLight (noted in the summary's `skipped`). Empty: the scene's
+        /// DomeLight if it has one (texture × its intensity, rotated with the dome), else none.
+        environment: String = String::new(), unit = "", range = "empty or path to an .exr file";
+        /// Multiplier of the environment map's radiance (not of a DomeLight's, which has its own intensity).
+        environment_intensity: f64 = 1.0, unit = "", range = "0 to 1e6";
+        /// Principal ordinates of the environment at most (0: the preset's `ordinates`).
+        environment_ordinates: u32 = 0, unit = "directions", range = "0 to 4096";
+        /// How the ordinates' directions are chosen: "importance" (sampled from the map's luminance,
+        /// Sec. 5.1) or "fibonacci" (the preset's well-spread set).
+        environment_set: String = String::from("importance"), unit = "", range = "importance | fibonacci";
+        /// Range width of the joint-bilateral upsampling relative to the largest density (0: trilinear).
+        range_sigma: f64 = 0.25, unit = "", range = "0 to 100";
+        /// Photons of the elek2014 Fig. 12 comparison on the unit cube (σ_s = 4, albedo 1, g = 0, 0.7,
+        /// 0.96) against Monte-Carlo light tracing, with this stage's preset (0: none).
+        fig12_photons: u32 = 0, unit = "photons", range = "0 to 100000000";
+        /// Width and height of the Fig. 12 cube images (POP against path tracing).
+        fig12_size: u32 = 64, unit = "px", range = "4 to 1024";
+        /// Paths per pixel of the path-traced cube images.
+        fig12_samples: u32 = 64, unit = "paths", range = "1 to 100000";
+        /// Paths per pixel of an independent path-traced image of the scattered light (the scene with
+        /// black surfaces, the lights POP propagates and the medium confined to POP's box) that POP's
+        /// scattered light is compared with (0: none).
+        reference_samples: u32 = 0, unit = "paths", range = "0 to 100000";
+        /// Width of the reference comparison (both images; the height follows the camera's aspect).
+        reference_width: u32 = 64, unit = "px", range = "4 to 1024";
+        /// Output folder name in the output directory; empty means the stage id.
+        output: String = String::new(), unit = "", range = "plain folder name";
+    }
+}
+
+crate::stages::view::impl_view_fields!(PopRender);
+
+/// One light's propagation.
+#[derive(Debug, Clone, Serialize)]
+pub struct LightRun {
+    /// Light name.
+    pub light: String,
+    /// `"directional"` (rectilinear grid, elek2014 Sec. 4), `"environment"` (one ordinate of the
+    /// environment map on its rectilinear grid, Sec. 5) or `"point"` (radial grid, Sec. 6; spot and sphere
+    /// lights too).
+    pub kind: &'static str,
+    /// Grid cells: (lateral, lateral, along the light), or for a radial grid (octahedral n, n, shells).
+    pub grid: [usize; 3],
+    /// Cell size \[m\]; for a radial grid the innermost shell's outer radius, the outermost's, and the
+    /// angular cell size \[rad\].
+    pub cell: [f64; 3],
+    /// Eq. 10's switch iteration `m'`.
+    pub switch_iteration: usize,
+    /// Anisotropic iterations run.
+    pub anisotropic_iterations: usize,
+    /// Isotropic residuum iterations run.
+    pub isotropic_iterations: usize,
+    /// Energy left after the last iteration, relative to the seeded energy.
+    pub residual_energy: f64,
+    /// Grid build and medium downsampling \[ms\].
+    pub grid_ms: f64,
+    /// Phase times \[ms\] (on the GPU: initialisation on the CPU, the iterations' GPU times).
+    pub phases_ms: PhaseMs,
+    /// Merging this radial grid into the medium-aligned render grid \[ms\] (0 for directional lights).
+    pub merge_ms: f64,
+    /// `"cpu"` or `"gpu"`: where the iterations ran.
+    pub device: &'static str,
+    /// GPU time per pass kind (empty on the CPU).
+    pub gpu_passes: Vec<crate::render::gpu::PassTime>,
+}
+
+/// [`PhaseTimes`] in milliseconds.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct PhaseMs {
+    /// Initialisation sweep.
+    pub initialisation: f64,
+    /// Anisotropic propagation (accumulation included).
+    pub propagation: f64,
+    /// Isotropic residuum (accumulation included).
+    pub residuum: f64,
+    /// Accumulation alone.
+    pub accumulation: f64,
+}
+
+impl From<PhaseTimes> for PhaseMs {
+    fn from(t: PhaseTimes) -> Self {
+        Self {
+            initialisation: t.initialisation * 1e3,
+            propagation: t.propagation * 1e3,
+            residuum: t.residuum * 1e3,
+            accumulation: t.accumulation * 1e3,
+        }
+    }
+}
+
+/// One `g` of the Fig. 12 comparison.
+#[derive(Debug, Clone, Serialize)]
+pub struct Fig12Row {
+    /// Phase mean cosine.
+    pub g: f64,
+    /// Mid-slice errors, iterations and times.
+    pub slice: crate::stages::pop::fig12::SliceComparison,
+    /// Relative RMSE of POP's cube image against path tracing, noise removed.
+    pub image_error: f64,
+    /// The path-traced image's noise (relative RMSE).
+    pub image_noise: f64,
+    /// POP (propagation + ray march) and path-tracing times for the image \[ms\].
+    pub image_ms: [f64; 2],
+}
+
+/// What `summary.json` holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct PopSummary {
+    /// Scene file.
+    pub scene: String,
+    /// Image size.
+    pub size: [usize; 2],
+    /// The medium and its voxels.
+    pub medium: String,
+    /// Voxels of the medium volume.
+    pub voxels: [usize; 3],
+    /// Import, BVH, G-buffer, voxelisation \[ms\].
+    pub setup_ms: [f64; 4],
+    /// Per light.
+    pub lights: Vec<LightRun>,
+    /// Ray marching \[ms\].
+    pub ray_march_ms: f64,
+    /// Lights and media left out.
+    pub skipped: Vec<String>,
+    /// elek2014 Fig. 12 against Monte-Carlo light tracing.
+    pub fig12: Vec<Fig12Row>,
+    /// POP's scattered light against path tracing of the same view (`reference_samples > 0`).
+    pub reference: Option<ReferenceComparison>,
+    /// The environment lighting (the `environment` map, or the scene's DomeLight).
+    pub environment: Option<EnvSummary>,
+    /// The VPLs of the surfaces' reflected light (when `surface_vpls > 0`): maps, VPLs, flux, time.
+    pub reflection: Option<pop_scene::Reflection>,
+}
+
+/// POP's scattered light against an independent path-traced image of it.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReferenceComparison {
+    /// Image size of both.
+    pub size: [usize; 2],
+    /// Paths per pixel of the reference.
+    pub samples: u32,
+    /// Relative RMS error of POP's scattered light, `sqrt(Σ(pop − ref)²/Σ ref²)` over pixels and channels.
+    pub error: f64,
+    /// The reference's own noise in the same units, `sqrt(Σ stderr²/Σ ref²)`: part of `error`.
+    pub reference_noise: f64,
+    /// `error` with the noise removed, `sqrt(error² − noise²)`: the expected error against a noise-free
+    /// reference.
+    pub error_corrected: f64,
+    /// Ratio of POP's summed scattered light to the reference's (energy bias).
+    pub total_ratio: f64,
+    /// POP frame (all phases) and path-tracing times \[ms\].
+    pub ms: [f64; 2],
+}
+
+/// A rendered POP frame (no G-buffer colour).
+pub struct PopFrame {
+    /// Scattered light of all lights.
+    pub scattered: RgbImage,
+    /// Transmittance to the surface.
+    pub transmittance: RgbImage,
+    /// Per light.
+    pub lights: Vec<LightRun>,
+    /// Ray marching \[ms\].
+    pub march_ms: f64,
+    /// The environment's ordinates and their phases (when the stage has an environment map).
+    pub environment: Option<EnvSummary>,
+}
+
+/// The environment lighting of a frame (elek2014 Sec. 5).
+#[derive(Debug, Clone, Serialize)]
+pub struct EnvSummary {
+    /// Map file (the stage's `environment`), or `DomeLight <prim> (<texture>)`.
+    pub map: String,
+    /// Map size.
+    pub size: [usize; 2],
+    /// `∫ L dω` of the map per channel \[W/m²\].
+    pub integral: [f64; 3],
+    /// The ordinates propagated (direction of travel, irradiance, initial anisotropy, cell solid angle).
+    pub ordinates: Vec<EnvOrdinate>,
+    /// Whether the ordinates were placed with the camera's importance (Sec. 5.2; the preset's
+    /// `importance`, with `environment_set: "importance"`).
+    pub importance: bool,
+    /// Importance propagation and its projection onto the directions (Fig. 14 "importance") \[ms\].
+    pub importance_ms: f64,
+    /// Choosing the ordinates (Fig. 14 "ordinates") \[ms\].
+    pub ordinates_ms: f64,
+    /// Merging the ordinates' accumulation grids into the medium-aligned grid (Sec. 5.3) \[ms\].
+    pub merge_ms: f64,
+}
+
+/// The POP settings of a preset table for a grid (Eq. 10's switch from the medium's mean `σ_s` and `g`).
+pub fn settings_for(table: &PopPresetTable, grid: &Grid) -> (Settings, FlowTable) {
+    let (sigma_s_mean, g) = crate::stages::pop::grid::Cell::means(&grid.cells, grid.g);
+    // The seeds start at a = g (propagate's module doc): the largest anisotropy Eq. 10 starts from.
+    preset_settings(table, g, sigma_s_mean, grid.size[2], grid.dims[2])
+}
+
+/// The iteration settings and flow table of a preset, with Eq. 10's switch `m'` for phase mean cosine
+/// `g` (also the seeds' anisotropy), mean `σ_s`, cell size `dx` along the light and `grid_len` cells
+/// along it. Uncapped: `propagate` switches only when `m'` is below the iteration budget.
+fn preset_settings(
+    table: &PopPresetTable,
+    g: f64,
+    sigma_s_mean: f64,
+    dx: f64,
+    grid_len: usize,
+) -> (Settings, FlowTable) {
+    let def = &table.def;
+    let switch = crate::tables::pop_preset::switch_iteration_raw(def.eps_a, g, g, sigma_s_mean, dx, grid_len)
+        .unwrap_or(usize::MAX);
+    let flow = preset_flow(table);
+    let settings = Settings {
+        iterations: def.iterations as usize,
+        residuum: def.residuum,
+        switch_iteration: switch,
+        residuum_iterations: def.residuum_iterations as usize,
+        eps_l: def.eps_l,
+    };
+    (settings, flow)
+}
+
+/// The preset's flow table (the exact partition when the stored rows are unusable).
+fn preset_flow(table: &PopPresetTable) -> FlowTable {
+    FlowTable::from_rows(table.flow_rows().to_vec()).unwrap_or_else(|_| FlowTable::exact(table.def.a_bins as usize))
+}
+
+/// Runs the propagation on `device`: the CPU solver, or its GPU twin ([`crate::stages::pop::gpu`]) with
+/// the GPU's per-pass times.
+pub fn propagate_on(
+    device: &crate::render::gpu::Device,
+    grid: &Grid,
+    light: &crate::stages::pop::medium::DirectionalLight,
+    occluder: &dyn crate::stages::pop::grid::Occluder,
+    flow: &FlowTable,
+    settings: &Settings,
+    eye: glam::DVec3,
+) -> Result<(propagate::Propagation, Vec<crate::render::gpu::PassTime>), String> {
+    match device {
+        crate::render::gpu::Device::Cpu => {
+            Ok((propagate::propagate(grid, light, occluder, flow, settings, Observer::Eye(eye)), Vec::new()))
+        }
+        #[cfg(feature = "gpu")]
+        crate::render::gpu::Device::Gpu(gpu) => {
+            crate::stages::pop::gpu::propagate(gpu, grid, light, occluder, flow, settings, Observer::Eye(eye))
+                .map_err(|e| e.to_string())
+        }
+    }
+}
+
+/// Propagates every directional light of `media` on `device` and ray-marches the camera view.
+pub fn render_frame(
+    media: &SceneMedia,
+    bvh: &SceneBvh,
+    table: &PopPresetTable,
+    cam: &ViewCamera,
+    distance: &[f64],
+    range_sigma: f64,
+    device: &crate::render::gpu::Device,
+) -> Result<PopFrame, String> {
+    let occluder = BvhOccluder(bvh);
+    let dims = table.def.grid.map(|v| v as usize);
+    let (w, h) = (cam.width, cam.height);
+    let mut scattered = vec![[0.0f64; 3]; w * h];
+    let mut transmittance = vec![[1.0f64; 3]; w * h];
+    let mut lights = Vec::new();
+    let mut march_ms = 0.0;
+    let opts =
+        MarchOptions { range_sigma: if range_sigma > 0.0 { range_sigma } else { f64::INFINITY }, ..Default::default() };
+    for (light, name) in media.lights.iter().zip(&media.light_names) {
+        let t0 = Instant::now();
+        let grid = Grid::new(&media.medium, light.direction, dims, &occluder)?;
+        let grid_ms = ms(t0);
+        let (settings, flow) = settings_for(table, &grid);
+        let (p, gpu_passes) = propagate_on(device, &grid, light, &occluder, &flow, &settings, cam.position)?;
+        let t0 = Instant::now();
+        let f = render::march(&grid, &p.toward_eye, &media.medium, cam, Some(distance), &opts);
+        march_ms += ms(t0);
+        for (s, r) in scattered.iter_mut().zip(&f.radiance) {
+            for c in 0..3 {
+                s[c] += r[c];
+            }
+        }
+        transmittance = f.transmittance;
+        let seeded = p.energy.first().copied().unwrap_or(0.0);
+        lights.push(LightRun {
+            light: name.clone(),
+            kind: "directional",
+            merge_ms: 0.0,
+            grid: grid.dims,
+            cell: grid.size,
+            switch_iteration: settings.switch_iteration,
+            anisotropic_iterations: p.anisotropic_iterations,
+            isotropic_iterations: p.isotropic_iterations,
+            residual_energy: if seeded > 0.0 { p.energy.last().copied().unwrap_or(0.0) / seeded } else { 0.0 },
+            grid_ms,
+            phases_ms: p.times.into(),
+            device: device.name(),
+            gpu_passes,
+        });
+    }
+    let mut env_summary = None;
+    if let Some(env) = &media.environment {
+        let (f, summary) = render_environment(media, env, &occluder, table, cam, distance, &opts, &mut lights)?;
+        march_ms += f.march_ms;
+        for (s, r) in scattered.iter_mut().zip(&f.frame.radiance) {
+            for c in 0..3 {
+                s[c] += r[c];
+            }
+        }
+        transmittance = f.frame.transmittance;
+        env_summary = Some(summary);
+    }
+    if !media.points.is_empty() {
+        let f = render_points(media, &occluder, table, cam, distance, &opts, &mut lights)?;
+        march_ms += f.march_ms;
+        for (s, r) in scattered.iter_mut().zip(&f.frame.radiance) {
+            for c in 0..3 {
+                s[c] += r[c];
+            }
+        }
+        transmittance = f.frame.transmittance;
+    }
+    let to_img =
+        |v: Vec<[f64; 3]>| Image { width: w, height: h, data: v.into_iter().map(|c| c.map(|x| x as f32)).collect() };
+    Ok(PopFrame {
+        scattered: to_img(scattered),
+        transmittance: to_img(transmittance),
+        lights,
+        march_ms,
+        environment: env_summary,
+    })
+}
+
+/// The point lights' part of a frame.
+struct PointFrame {
+    frame: render::Frame,
+    march_ms: f64,
+}
+
+/// The merge grid's resolution: double the preset's rectilinear grid (elek2014 Sec. 5.3), at most 128.
+pub fn merge_dims(table: &PopPresetTable) -> [usize; 3] {
+    table.def.grid.map(|v| (2 * v as usize).clamp(1, 128))
+}
+
+/// The iteration settings of a radial grid: Eq. 10 with the mean `σ_s` of its occupied cells and the mean
+/// shell spacing `r_far/S`, at least `S` iterations before the switch.
+pub fn radial_settings(table: &PopPresetTable, grid: &RadialGrid) -> (Settings, FlowTable) {
+    let (sigma_s_mean, g) = crate::stages::pop::grid::Cell::means(&grid.cells, grid.g);
+    let s = grid.shells();
+    preset_settings(table, g, sigma_s_mean, grid.radii[s] / s as f64, s)
+}
+
+/// Propagates every point light on its radial grid (CPU), merges the grids into one medium-aligned grid
+/// and ray-marches it with the lights' single scattering.
+fn render_points(
+    media: &SceneMedia,
+    occluder: &BvhOccluder<'_>,
+    table: &PopPresetTable,
+    cam: &ViewCamera,
+    distance: &[f64],
+    opts: &MarchOptions,
+    runs: &mut Vec<LightRun>,
+) -> Result<PointFrame, String> {
+    let [n, shells] = table.def.radial_grid.map(|v| v as usize);
+    let mut grids = Vec::new();
+    for (light, name) in media.points.iter().zip(&media.point_names) {
+        let t0 = Instant::now();
+        let grid = RadialGrid::new(&media.medium, light.position, n, shells, occluder)?;
+        let grid_ms = ms(t0);
+        let (settings, flow) = radial_settings(table, &grid);
+        let p = radial_propagate::propagate(&grid, &media.medium, light, occluder, &flow, &settings, cam.position);
+        let seeded = p.energy.first().copied().unwrap_or(0.0);
+        runs.push(LightRun {
+            light: name.clone(),
+            kind: "point",
+            grid: [n, n, grid.shells()],
+            cell: [grid.radii[1], grid.radii[grid.shells()], (4.0 * std::f64::consts::PI).sqrt() / n as f64],
+            switch_iteration: settings.switch_iteration,
+            anisotropic_iterations: p.anisotropic_iterations,
+            isotropic_iterations: p.isotropic_iterations,
+            residual_energy: if seeded > 0.0 { p.energy.last().copied().unwrap_or(0.0) / seeded } else { 0.0 },
+            grid_ms,
+            phases_ms: p.times.into(),
+            merge_ms: 0.0,
+            device: "cpu",
+            gpu_passes: Vec::new(),
+        });
+        grids.push((grid, p));
+    }
+    let t0 = Instant::now();
+    let merged = Grid::medium_aligned(&media.medium, merge_dims(table))?;
+    // The VPLs of reflected light bring their uncollided light through the grid too.
+    let reflected = media.first_reflection_vpl();
+    let fields: Vec<std::borrow::Cow<'_, [[f64; 3]]>> = grids
+        .iter()
+        .enumerate()
+        .map(|(i, (g, p))| {
+            if i < reflected {
+                return std::borrow::Cow::Borrowed(p.toward_eye.as_slice());
+            }
+            let direct = radial_propagate::uncollided_toward_eye(g, p, cam.position);
+            std::borrow::Cow::Owned(
+                p.toward_eye.iter().zip(direct).map(|(a, b)| [0, 1, 2].map(|c| a[c] + b[c])).collect(),
+            )
+        })
+        .collect();
+    let sources: Vec<(&RadialGrid, &[[f64; 3]])> =
+        grids.iter().zip(&fields).map(|((g, _), f)| (g, f.as_ref())).collect();
+    let merged_field = merge::merge(&merged, &sources);
+    let merge_ms = ms(t0);
+    // The merge is shared; each light is charged its share.
+    let first = runs.len() - grids.len();
+    for r in &mut runs[first..] {
+        r.merge_ms = merge_ms / grids.len() as f64;
+    }
+    let t0 = Instant::now();
+    let lights: Vec<(&RadialGrid, &radial_propagate::RadialPropagation)> =
+        grids.iter().take(reflected).map(|(g, p)| (g, p)).collect();
+    let frame = merge::march_points(&merged, &merged_field, &lights, &media.medium, cam, Some(distance), opts);
+    Ok(PointFrame { frame, march_ms: ms(t0) })
+}
+
+/// Propagates every ordinate of the environment on its own grid (CPU), merges the accumulation grids into
+/// one medium-aligned grid (Sec. 5.3) and ray-marches it.
+#[allow(clippy::too_many_arguments)]
+fn render_environment(
+    media: &SceneMedia,
+    env: &Environment,
+    occluder: &BvhOccluder<'_>,
+    table: &PopPresetTable,
+    cam: &ViewCamera,
+    distance: &[f64],
+    opts: &MarchOptions,
+    runs: &mut Vec<LightRun>,
+) -> Result<(PointFrame, EnvSummary), String> {
+    let n = if env.ordinates == 0 { table.def.ordinates as usize } else { env.ordinates };
+    let flow = preset_flow(table);
+    let t0 = Instant::now();
+    let importance = if table.def.importance && env.set == OrdinateSet::Importance {
+        let settings = Settings {
+            iterations: table.def.iterations as usize,
+            residuum: false,
+            switch_iteration: usize::MAX,
+            residuum_iterations: 0,
+            eps_l: table.def.eps_l,
+        };
+        let size = table.def.importance_map.map(|v| v as usize);
+        let n = table.def.importance_grid as usize;
+        Some(environment::importance_map(&media.medium, occluder, cam, &flow, &settings, n, size)?)
+    } else {
+        None
+    };
+    let importance_ms = ms(t0);
+    let t0 = Instant::now();
+    let ords = environment::ordinates_with_importance(&env.map, n, env.set, importance.as_ref());
+    let ordinates_ms = ms(t0);
+    let settings = |grid: &Grid| settings_for(table, grid).0;
+    let env_opts = environment::EnvOptions {
+        dims: table.def.grid.map(|v| v as usize),
+        merge_dims: merge_dims(table),
+        flow: &flow,
+        settings: &settings,
+        eye: cam.position,
+    };
+    let run = environment::propagate_environment(&media.medium, &ords, occluder, &env_opts)?;
+    for (k, ((grid, settings, p), grid_s)) in run.ordinates.iter().zip(&run.grid_seconds).enumerate() {
+        let seeded = p.energy.first().copied().unwrap_or(0.0);
+        runs.push(LightRun {
+            light: format!("{} ordinate {k}", env.name),
+            kind: "environment",
+            grid: grid.dims,
+            cell: grid.size,
+            switch_iteration: settings.switch_iteration,
+            anisotropic_iterations: p.anisotropic_iterations,
+            isotropic_iterations: p.isotropic_iterations,
+            residual_energy: if seeded > 0.0 { p.energy.last().copied().unwrap_or(0.0) / seeded } else { 0.0 },
+            grid_ms: grid_s * 1e3,
+            phases_ms: p.times.into(),
+            merge_ms: 0.0,
+            device: "cpu",
+            gpu_passes: Vec::new(),
+        });
+    }
+    if let Some((grid, p)) = &run.residuum {
+        runs.push(LightRun {
+            light: format!("{} isotropic residuum", env.name),
+            kind: "environment residuum",
+            grid: grid.dims,
+            cell: grid.size,
+            switch_iteration: 0,
+            anisotropic_iterations: 0,
+            isotropic_iterations: p.isotropic_iterations,
+            residual_energy: {
+                let first = p.energy.first().copied().unwrap_or(0.0);
+                if first > 0.0 { p.energy.last().copied().unwrap_or(0.0) / first } else { 0.0 }
+            },
+            grid_ms: run.handover_seconds * 1e3,
+            phases_ms: p.times.into(),
+            merge_ms: 0.0,
+            device: "cpu",
+            gpu_passes: Vec::new(),
+        });
+    }
+    let merge_ms = run.merge_seconds * 1e3;
+    let (merged, merged_field) = (&run.merged.0, &run.merged.1);
+    let t0 = Instant::now();
+    let frame = render::march(merged, merged_field, &media.medium, cam, Some(distance), opts);
+    let summary = EnvSummary {
+        map: env.name.clone(),
+        size: [env.map.width, env.map.height],
+        integral: env.map.integral(),
+        ordinates: ords,
+        importance: importance.is_some(),
+        importance_ms,
+        ordinates_ms,
+        merge_ms,
+    };
+    Ok((PointFrame { frame, march_ms: ms(t0) }, summary))
+}
+
+/// The environment map of the scene's dome light ([`environment::dome_map`]); a texture that cannot be
+/// read is an input error naming the scene file, the prim and the texture, with the fix.
+fn dome_environment(id: &str, scene: &Scene, dome: &EnvironmentLight) -> Result<EnvMap, StageError> {
+    environment::dome_map(dome).map_err(|e| {
+        let texture = dome.texture.as_ref().map_or("(none)".to_string(), |t| t.display().to_string());
+        StageError::Input {
+            stage: id.into(),
+            message: format!(
+                "{}: DomeLight {}: cannot light the medium with its texture {texture}: {e}",
+                scene.source.display(),
+                dome.name
+            ),
+            help: "fix the DomeLight's inputs:texture:file: it must name a latitude-longitude RGB OpenEXR file \
+                   (convert others, e.g. `oiiotool sky.hdr -o sky.exr`), and a relative asset path is relative to \
+                   the layer that authors it; or give the stage's environment field, which overrides the dome"
+                .into(),
+        }
+    })
+}
+
+/// `colour · transmittance (+ scattered)`.
+pub fn compose(colour: &RgbImage, frame: &PopFrame, with_scattered: bool) -> RgbImage {
+    let data = colour
+        .data
+        .iter()
+        .zip(&frame.transmittance.data)
+        .zip(&frame.scattered.data)
+        .map(|((c, t), s)| [0, 1, 2].map(|k| c[k] * t[k] + if with_scattered { s[k] } else { 0.0 }))
+        .collect();
+    Image { width: colour.width, height: colour.height, data }
+}
+
+impl PopRender {
+    /// Range checks.
+    pub fn validate(&self) -> Vec<FieldIssue> {
+        let mut v = self.fields().validate();
+        let mut issue = |field: &'static str, message: String, help: &str| {
+            v.push(FieldIssue { field, message, help: help.into() });
+        };
+        if self.table.is_empty() {
+            issue("table", "table is empty".into(), "give the id of a PopPreset table, e.g. table: \"pop_realtime\"");
+        }
+        if !(1..=1024).contains(&self.voxels) {
+            issue("voxels", format!("voxels = {}", self.voxels), "use 1 to 1024");
+        }
+        if !self.density_raw.is_empty() && self.density_dims.iter().any(|d| !(1..=1024).contains(d)) {
+            issue(
+                "density_dims",
+                format!("density_dims = {:?} with density_raw = \"{}\"", self.density_dims, self.density_raw),
+                "give the raw volume's voxels per axis, each 1 to 1024",
+            );
+        }
+        if !self.density_raw.is_empty() && !self.density_slices.is_empty() {
+            issue(
+                "density_slices",
+                format!("both density_raw = \"{}\" and density_slices = \"{}\"", self.density_raw, self.density_slices),
+                "give one density volume: a raw file or a folder of EXR slices",
+            );
+        }
+        if !(self.environment_intensity.is_finite() && (0.0..=1e6).contains(&self.environment_intensity)) {
+            issue(
+                "environment_intensity",
+                format!("environment_intensity = {}", self.environment_intensity),
+                "use 0 to 1e6 (1 keeps the map's radiance)",
+            );
+        }
+        if self.surface_vpls > 1024 {
+            issue(
+                "surface_vpls",
+                format!("surface_vpls = {}", self.surface_vpls),
+                "use 0 (surfaces only occlude) to 1024 VPLs",
+            );
+        }
+        if !(1..=1024).contains(&self.rsm_size) {
+            issue("rsm_size", format!("rsm_size = {}", self.rsm_size), "use 1 to 1024 texels per side");
+        }
+        if self.vpls > 256 {
+            issue("vpls", format!("vpls = {}", self.vpls), "use 0 (skip area lights) to 256 VPLs per emitter");
+        }
+        if self.environment_ordinates > 4096 {
+            issue(
+                "environment_ordinates",
+                format!("environment_ordinates = {}", self.environment_ordinates),
+                "use 0 (the preset's count) to 4096",
+            );
+        }
+        if self.ordinate_set().is_none() {
+            issue(
+                "environment_set",
+                format!("environment_set = \"{}\"", self.environment_set),
+                "use \"importance\" or \"fibonacci\"",
+            );
+        }
+        if !(self.range_sigma.is_finite() && (0.0..=100.0).contains(&self.range_sigma)) {
+            issue("range_sigma", format!("range_sigma = {}", self.range_sigma), "use 0 (trilinear) to 100");
+        }
+        if self.fig12_photons > 100_000_000 {
+            issue("fig12_photons", format!("fig12_photons = {}", self.fig12_photons), "use 0 (none) to 100000000");
+        }
+        if !(4..=1024).contains(&self.fig12_size) {
+            issue("fig12_size", format!("fig12_size = {}", self.fig12_size), "use 4 to 1024");
+        }
+        if self.reference_samples > 100_000 {
+            issue(
+                "reference_samples",
+                format!("reference_samples = {}", self.reference_samples),
+                "use 0 (no comparison) to 100000",
+            );
+        }
+        if !(4..=1024).contains(&self.reference_width) {
+            issue("reference_width", format!("reference_width = {}", self.reference_width), "use 4 to 1024");
+        }
+        if !(1..=100_000).contains(&self.fig12_samples) {
+            issue("fig12_samples", format!("fig12_samples = {}", self.fig12_samples), "use 1 to 100000");
+        }
+        v
+    }
+
+    fn open_table(&self, id: &str, ctx: &StageContext) -> Result<PopPresetTable, StageError> {
+        let path = ctx.out_dir.join(format!("{}.vtab", self.table));
+        PopPresetTable::open(&path).map_err(|e| StageError::Table { stage: id.into(), path, message: e.to_string() })
+    }
+
+    /// The scene's media for POP (voxelised, with the raw or EXR-slice density when given), with the
+    /// VPLs of the surfaces' reflected light when `surface_vpls > 0`.
+    pub fn media(&self, id: &str, ctx: &StageContext, scene: &Scene, bvh: &SceneBvh) -> Result<SceneMedia, StageError> {
+        let fail = |message: String| StageError::Input {
+            stage: id.into(),
+            message,
+            help: "fix the scene's medium and lights, or the stage's density_raw / density_dims".into(),
+        };
+        let raw = if !self.density_slices.is_empty() {
+            let (dims, values) = crate::stages::pop::medium::read_exr_slices(&ctx.base_dir.join(&self.density_slices))
+                .map_err(|message| StageError::Input {
+                    stage: id.into(),
+                    message,
+                    help: "give density_slices a folder of EXR images, one z slice per file in name order".into(),
+                })?;
+            Some(RawDensity { dims, values })
+        } else if self.density_raw.is_empty() {
+            None
+        } else {
+            let dims = self.density_dims.map(|d| d as usize);
+            let values = crate::stages::pop::medium::read_raw_density(&ctx.base_dir.join(&self.density_raw), dims)
+                .map_err(fail)?;
+            Some(RawDensity { dims, values })
+        };
+        let ordinates = self.environment_ordinates as usize;
+        let set = self.ordinate_set().unwrap_or(OrdinateSet::Importance);
+        let mut overridden = None;
+        let environment = if !self.environment.is_empty() {
+            let path = ctx.base_dir.join(&self.environment);
+            let map = EnvMap::read_exr(&path, self.environment_intensity).map_err(|message| StageError::Input {
+                stage: id.into(),
+                message,
+                help: "give environment a latitude-longitude RGB EXR map, relative to the pipeline file".into(),
+            })?;
+            // The stage's map wins over the scene's dome, and says so in `skipped`.
+            overridden = scene.environment.as_ref().map(|dome| {
+                format!(
+                    "DomeLight {}: overridden by the stage's environment map {} (leave environment empty to light \
+                     with the dome)",
+                    dome.name, self.environment
+                )
+            });
+            Some(Environment { map, name: self.environment.clone(), ordinates, set })
+        } else if let Some(dome) = &scene.environment {
+            let map = dome_environment(id, scene, dome)?;
+            let what = dome.texture.as_ref().map_or("uniform".to_string(), |t| t.display().to_string());
+            Some(Environment { map, name: format!("DomeLight {} ({what})", dome.name), ordinates, set })
+        } else {
+            None
+        };
+        let mut media =
+            pop_scene::scene_media(scene, self.voxels as usize, raw.as_ref(), environment, self.vpls as usize)
+                .map_err(fail)?;
+        pop_scene::add_reflection_vpls(&mut media, scene, bvh, self.surface_vpls as usize, self.rsm_size as usize);
+        media.skipped.extend(overridden);
+        Ok(media)
+    }
+
+    /// The ordinate set named by `environment_set`.
+    fn ordinate_set(&self) -> Option<OrdinateSet> {
+        match self.environment_set.as_str() {
+            "importance" => Some(OrdinateSet::Importance),
+            "fibonacci" => Some(OrdinateSet::Fibonacci),
+            _ => None,
+        }
+    }
+
+    /// Runs the stage.
+    pub fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        let fields = self.fields();
+        let dir = fields.out_dir(id, ctx)?;
+        let table = self.open_table(id, ctx)?;
+        let v = fields.load(id, ctx, None)?;
+        let t0 = Instant::now();
+        let media = self.media(id, ctx, &v.scene, &v.bvh)?;
+        // The reflective shadow maps are timed on their own (`reflection` in the summary).
+        let voxel_ms = ms(t0) - media.reflection.as_ref().map_or(0.0, |r| r.ms);
+        let g = &v.gbuffer;
+        let distance: Vec<f64> = g.distance.data.iter().map(|&d| f64::from(d)).collect();
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
+        let frame =
+            render_frame(&media, &v.bvh, &table, &g.camera, &distance, self.range_sigma, ctx.device).map_err(fail)?;
+        let image = compose(&g.colour, &frame, true);
+        let mut outputs = view::write_image(
+            id,
+            &dir,
+            "pop",
+            &image,
+            &[("scattered", &frame.scattered), ("transmittance", &frame.transmittance), ("colour", &g.colour)],
+        )?;
+        let png = dir.join("pop_scattered.png");
+        crate::image_io::write_png_preview(
+            &png,
+            frame.scattered.width,
+            frame.scattered.height,
+            &frame.scattered.data,
+            None,
+        )
+        .map_err(|e| StageError::Output { stage: id.into(), path: png.clone(), message: e.to_string() })?;
+        outputs.push(png);
+        let fig12 = self.fig12(id, &dir, &table, &mut outputs)?;
+        let summary = PopSummary {
+            scene: fields.scene_path(ctx.base_dir).display().to_string(),
+            size: [g.camera.width, g.camera.height],
+            medium: media.medium_name.clone(),
+            voxels: media.medium.dims,
+            setup_ms: [v.import_ms, v.bvh_ms, g.distance_ms + g.colour_ms, voxel_ms],
+            lights: frame.lights.clone(),
+            ray_march_ms: frame.march_ms,
+            skipped: media.skipped.clone(),
+            fig12,
+            reference: self.reference(id, ctx, &table, &media, &dir, &mut outputs)?,
+            environment: frame.environment.clone(),
+            reflection: media.reflection.clone(),
+        };
+        outputs.push(view::write_json(id, &dir.join("summary.json"), &summary)?);
+        let prop_ms: f64 = frame.lights.iter().map(|l| l.phases_ms.propagation + l.phases_ms.residuum).sum();
+        let mut line = format!(
+            "{}×{}, {} light(s), propagation {prop_ms:.0} ms, ray march {:.0} ms",
+            g.camera.width,
+            g.camera.height,
+            frame.lights.len(),
+            frame.march_ms
+        );
+        if let Some(r) = &summary.reference {
+            line.push_str(&format!(
+                "; vs path tracing at {}×{}: scattered light {:.1} % off (noise-corrected), total ×{:.3}",
+                r.size[0],
+                r.size[1],
+                100.0 * r.error_corrected,
+                r.total_ratio
+            ));
+        }
+        for r in &summary.fig12 {
+            line.push_str(&format!(
+                "; Fig. 12 g {}: collided fluence {:.0} %, image {:.0} % off",
+                r.g,
+                100.0 * r.slice.collided_error,
+                100.0 * r.image_error
+            ));
+        }
+        Ok(StageOutcome { outputs, summary: format!("{line} → {}", dir.display()) })
+    }
+}
+
+impl PopRender {
+    /// POP's scattered light against path tracing of the same view at `reference_width` (module doc of
+    /// [`pop_scene::scattering_reference_scene`]); writes `reference_scattered.png` and
+    /// `reference_pop.png` beside the stage's image.
+    fn reference(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+        table: &PopPresetTable,
+        media: &SceneMedia,
+        dir: &Path,
+        outputs: &mut Vec<std::path::PathBuf>,
+    ) -> Result<Option<ReferenceComparison>, StageError> {
+        if self.reference_samples == 0 {
+            return Ok(None);
+        }
+        let fields = self.fields();
+        let w = self.reference_width as usize;
+        let h = ((w as f64 * self.height as f64 / self.width as f64).round() as usize).max(1);
+        let v = fields.load(id, ctx, Some((w, h)))?;
+        let distance: Vec<f64> = v.gbuffer.distance.data.iter().map(|&d| f64::from(d)).collect();
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
+        let cam = &v.gbuffer.camera;
+        let t0 = Instant::now();
+        let frame =
+            render_frame(media, &v.bvh, table, cam, &distance, self.range_sigma, &crate::render::gpu::Device::Cpu)
+                .map_err(fail)?;
+        let pop_ms = ms(t0);
+        let c = compare_with_reference(&v.scene, media, cam, &frame.scattered, self.reference_samples);
+        for (name, img) in [("reference_scattered.png", &c.1), ("reference_pop.png", &frame.scattered)] {
+            let png = dir.join(name);
+            crate::image_io::write_png_preview(&png, w, h, &img.data, None).map_err(|e| StageError::Output {
+                stage: id.into(),
+                path: png.clone(),
+                message: e.to_string(),
+            })?;
+            outputs.push(png);
+        }
+        Ok(Some(ReferenceComparison { ms: [pop_ms, c.0.ms[1]], ..c.0 }))
+    }
+}
+
+/// Path-traces `scene`'s scattered light as POP sees it ([`pop_scene::scattering_reference_scene`]) from
+/// `cam` with `samples` paths per pixel and compares `pop` with it; returns the comparison (POP time 0)
+/// and the reference image. The environment's part (when the stage has one) comes from
+/// [`crate::reference::grid_mc::render_environment`] on POP's voxel medium with the scene's surfaces as
+/// black occluders, and is added to the lights' part (the scattered light is linear in the sources;
+/// the two estimates are independent, so their variances add).
+pub fn compare_with_reference(
+    scene: &Scene,
+    media: &SceneMedia,
+    cam: &ViewCamera,
+    pop: &RgbImage,
+    samples: u32,
+) -> (ReferenceComparison, RgbImage) {
+    let t0 = Instant::now();
+    let n = cam.width * cam.height;
+    let mut mean = vec![[0.0f64; 3]; n];
+    let mut variance = vec![[0.0f64; 3]; n];
+    // The scene's own surfaces (occluders of the environment, and where the camera sees an emitter).
+    let scene_bvh = (media.environment.is_some() || !media.vpl_sources.is_empty()).then(|| SceneBvh::build(scene));
+    if !media.lights.is_empty() || !media.points.is_empty() {
+        let ref_scene = pop_scene::scattering_reference_scene(scene, media);
+        let bvh = SceneBvh::build(&ref_scene);
+        let opts = crate::reference::volpath::VolPathOptions {
+            samples,
+            max_depth: 256,
+            rr_depth: 4,
+            seed: 0x5eed,
+            surface_bounces: pop_scene::reference_bounces(media),
+            eye_surfaces: false,
+            media: true,
+        };
+        for (i, (m, se)) in view::path_trace_pixels_with(&ref_scene, &bvh, cam, &opts).into_iter().enumerate() {
+            mean[i] = m.map(|v| if v.is_finite() { v } else { 0.0 });
+            variance[i] = se.map(|v| if v.is_finite() { v * v } else { 0.0 });
+        }
+    }
+    if let (Some(env), Some(bvh)) = (&media.environment, &scene_bvh) {
+        let opts = crate::reference::grid_mc::CameraOptions { samples, seed: 0xe7e, max_events: 100_000 };
+        let r =
+            crate::reference::grid_mc::render_environment(&media.medium, &env.map, &BvhOccluder(bvh), cam, None, &opts);
+        for ((m, v), (s, var)) in mean.iter_mut().zip(&r.radiance).zip(variance.iter_mut().zip(&r.variance)) {
+            for c in 0..3 {
+                m[c] += v[c];
+                s[c] += var[c];
+            }
+        }
+    }
+    let ref_ms = ms(t0);
+    // Pixels that see a VPL emitter directly hold its radiance in the reference: both images leave them out.
+    let masked = match &scene_bvh {
+        Some(bvh) if !media.vpl_sources.is_empty() => pop_scene::sees_vpl_emitter(scene, bvh, media, cam),
+        _ => vec![false; n],
+    };
+    let keep = |v: [f64; 3], m: bool| if m { [0.0; 3] } else { v };
+    let img = Image {
+        width: cam.width,
+        height: cam.height,
+        data: mean.iter().zip(&masked).map(|(v, &m)| keep(*v, m).map(|x| x as f32)).collect(),
+    };
+    let pop_kept = Image {
+        width: pop.width,
+        height: pop.height,
+        data: pop.data.iter().zip(&masked).map(|(v, &m)| if m { [0.0; 3] } else { *v }).collect(),
+    };
+    let pop = &pop_kept;
+    let variance_sum: f64 =
+        variance.iter().zip(&masked).filter(|(_, m)| !**m).map(|(v, _)| v.iter().sum::<f64>()).sum();
+    let error = crate::render::rel_rmse(pop, &img);
+    let sum = |i: &RgbImage| i.data.iter().map(|c| c.iter().map(|&v| f64::from(v)).sum::<f64>()).sum::<f64>();
+    let r = sum(&img);
+    let sq: f64 = mean.iter().zip(&masked).map(|(c, &m)| keep(*c, m).iter().map(|v| v * v).sum::<f64>()).sum();
+    let noise = if sq > 0.0 { (variance_sum / sq).sqrt() } else { 0.0 };
+    let c = ReferenceComparison {
+        size: [cam.width, cam.height],
+        samples,
+        error,
+        reference_noise: noise,
+        error_corrected: (error * error - noise * noise).max(0.0).sqrt(),
+        total_ratio: if r > 0.0 { sum(pop) / r } else { 0.0 },
+        ms: [0.0, ref_ms],
+    };
+    (c, img)
+}
+
+/// The Fig. 12 settings of a preset on an `n³` cube grid (Eq. 10's switch with the cube's `σ_s`).
+fn cube_settings(table: &PopPresetTable, g: f64, n: usize) -> (Settings, FlowTable) {
+    preset_settings(table, g, crate::stages::pop::fig12::SIGMA_S, 1.0 / n as f64, n)
+}
+
+/// The Fig. 12 values of `g`.
+pub const FIG12_G: [f64; 3] = [0.0, 0.7, 0.96];
+
+impl PopRender {
+    /// elek2014 Fig. 12 with this stage's preset on a 16³ grid (module doc): per `g`, the mid-slice
+    /// comparison, a plot of the collided radiance against the angle from the light in three cells on the
+    /// slice's centre line (`fig12_g<g>_radiance.png`), and POP's and the path tracer's cube images
+    /// (`fig12_g<g>_pop.png`, `fig12_g<g>_reference.png`).
+    fn fig12(
+        &self,
+        id: &str,
+        dir: &Path,
+        table: &PopPresetTable,
+        outputs: &mut Vec<std::path::PathBuf>,
+    ) -> Result<Vec<Fig12Row>, StageError> {
+        use crate::stages::pop::fig12;
+        if self.fig12_photons == 0 {
+            return Ok(Vec::new());
+        }
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the preset".into() };
+        let out =
+            |path: &Path, message: String| StageError::Output { stage: id.into(), path: path.to_path_buf(), message };
+        let n = 16;
+        let mut rows = Vec::new();
+        for g in FIG12_G {
+            let (settings, flow) = cube_settings(table, g, n);
+            let opts =
+                fig12::SliceOptions { cells: n, theta_bins: 18, photons: u64::from(self.fig12_photons), seed: 12 };
+            let slice = fig12::compare_slice(g, &flow, &settings, &opts).map_err(fail)?;
+            let size = self.fig12_size as usize;
+            let img = fig12::compare_image(g, &flow, &settings, n, [size, size], self.fig12_samples).map_err(fail)?;
+            let tag = format!("{g:.2}");
+            // Radiance against θ in three cells along the light, on the slice's centre line.
+            let mut series = Vec::new();
+            let centre = slice
+                .slice
+                .iter()
+                .map(|c| c.z)
+                .fold(f64::NAN, |m, z| if (z - 0.5).abs() < (m - 0.5).abs() || m.is_nan() { z } else { m });
+            for depth in [0.25, 0.5, 0.75] {
+                let Some(cell) = slice
+                    .slice
+                    .iter()
+                    .filter(|c| c.z == centre)
+                    .min_by(|a, b| (a.x - depth).abs().total_cmp(&(b.x - depth).abs()))
+                else {
+                    continue;
+                };
+                let nb = cell.pop_bins.len();
+                let theta = |b: usize| 180.0 * (b as f64 + 0.5) / nb as f64;
+                let pts = |v: &[f64]| -> Vec<(f64, f64)> {
+                    v.iter().enumerate().map(|(b, &r)| (theta(b), r.max(1e-6))).collect()
+                };
+                series.push(crate::report::plot::Series {
+                    name: format!("POP x = {:.2}", cell.x),
+                    points: pts(&cell.pop_bins),
+                });
+                series.push(crate::report::plot::Series {
+                    name: format!("light tracing x = {:.2}", cell.x),
+                    points: pts(&cell.mc_bins),
+                });
+            }
+            let png = dir.join(format!("fig12_g{tag}_radiance.png"));
+            let plot = crate::report::plot::Plot {
+                title: &format!("elek2014 Fig. 12, g = {g}: collided radiance in the mid slice"),
+                x_label: "angle from the light direction [deg]",
+                y_label: "collided radiance [W/(m² sr)] per unit irradiance",
+                x_scale: crate::report::plot::Scale::Linear,
+                y_scale: crate::report::plot::Scale::Log10,
+                series: &series,
+                width: 1024,
+                height: 720,
+            };
+            crate::report::plot::write_png(&png, &plot).map_err(|e| out(&png, e.to_string()))?;
+            outputs.push(png);
+            for (name, data) in [("pop", &img.pop), ("reference", &img.reference)] {
+                let png = dir.join(format!("fig12_g{tag}_{name}.png"));
+                let px: Vec<[f32; 3]> = data.iter().map(|c| c.map(|v| v as f32)).collect();
+                crate::image_io::write_png_preview(&png, size, size, &px, None)
+                    .map_err(|e| out(&png, e.to_string()))?;
+                outputs.push(png);
+            }
+            rows.push(Fig12Row {
+                g,
+                slice,
+                image_error: img.error,
+                image_noise: img.reference_noise,
+                image_ms: [img.pop_ms, img.reference_ms],
+            });
+        }
+        Ok(rows)
+    }
+}
+
+/// One point of the error-against-time ladder.
+#[derive(Debug, Clone, Serialize)]
+pub struct LadderPoint {
+    /// Grid cells per axis.
+    pub grid: usize,
+    /// Anisotropic iteration cap `M`.
+    pub iterations: usize,
+    /// Isotropic residuum on.
+    pub residuum: bool,
+    /// Propagation time (initialisation, anisotropic and residuum iterations) \[ms\].
+    pub propagation_ms: f64,
+    /// Iterations run (anisotropic + isotropic).
+    pub iterations_run: usize,
+    /// Relative RMSE of the composed image against the path-traced one, noise removed.
+    pub error: f64,
+}
+
+impl PopRender {
+    /// `voltab report --stages`: on the Fig. 12 cube with `g = 0.7`, POP's collided-fluence error in the
+    /// mid slice against a light-tracing reference of `max(fig12_photons, 400 000)` photons, against
+    /// POP's run time, over grid resolutions, iteration caps and with and without the isotropic residuum;
+    /// and the light tracer's own error (against the same reference) at increasing photon counts
+    /// (`<id>-pop.md`, `<id>-pop-error-vs-time.png`).
+    pub fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<String, StageError> {
+        use crate::stages::pop::fig12;
+        let out =
+            |path: &Path, message: String| StageError::Output { stage: id.into(), path: path.to_path_buf(), message };
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the preset".into() };
+        let table = self.open_table(id, ctx)?;
+        let g = 0.7;
+        let photons = u64::from(self.fig12_photons).max(400_000);
+        let mut points = Vec::new();
+        for grid in [8usize, 16, 32] {
+            let reference = fig12::reference_fluence(g, grid, photons, 99);
+            for iterations in [4usize, 8, 16, 32, 64, 128] {
+                for residuum in [false, true] {
+                    let (mut settings, flow) = cube_settings(&table, g, grid);
+                    settings.iterations = iterations;
+                    settings.residuum = residuum;
+                    let r = fig12::pop_fluence(g, grid, &flow, &settings).map_err(fail)?;
+                    points.push(LadderPoint {
+                        grid,
+                        iterations,
+                        residuum,
+                        propagation_ms: r.ms,
+                        iterations_run: r.iterations,
+                        error: fig12::slice_error(&r.collided, &reference.collided, grid),
+                    });
+                }
+            }
+        }
+        // The light tracer's own convergence on the 16³ tally.
+        let reference = fig12::reference_fluence(g, 16, photons, 99);
+        let mut mc_points = Vec::new();
+        for n in [1_000u64, 4_000, 16_000, 64_000] {
+            let r = fig12::reference_fluence(g, 16, n, 7);
+            mc_points.push((r.ms, fig12::slice_error(&r.collided, &reference.collided, 16)));
+        }
+        std::fs::create_dir_all(report_dir).map_err(|e| out(report_dir, e.to_string()))?;
+        let mut series = Vec::new();
+        for grid in [8usize, 16, 32] {
+            for residuum in [false, true] {
+                let pts: Vec<(f64, f64)> = points
+                    .iter()
+                    .filter(|p| p.grid == grid && p.residuum == residuum)
+                    .map(|p| (p.propagation_ms.max(1e-3), p.error.max(1e-6)))
+                    .collect();
+                let name = format!("POP {grid}³{}", if residuum { " + residuum" } else { "" });
+                series.push(crate::report::plot::Series { name, points: pts });
+            }
+        }
+        series.push(crate::report::plot::Series {
+            name: "light tracing".into(),
+            points: mc_points.iter().map(|&(t, e)| (t.max(1e-3), e.max(1e-6))).collect(),
+        });
+        let png = report_dir.join(format!("{id}-pop-error-vs-time.png"));
+        let plot = crate::report::plot::Plot {
+            title: &format!("{id}: POP on the elek2014 Fig. 12 cube (g = {g}), error against time"),
+            x_label: "run time [ms]",
+            y_label: "rel. RMS error of the collided fluence, mid slice",
+            x_scale: crate::report::plot::Scale::Log10,
+            y_scale: crate::report::plot::Scale::Log10,
+            series: &series,
+            width: 1024,
+            height: 720,
+        };
+        crate::report::plot::write_png(&png, &plot).map_err(|e| out(&png, e.to_string()))?;
+        let mut md = format!(
+            "## {id}: Principal-Ordinates Propagation (elek2014) on the Fig. 12 cube, g = {g}\n\nRelative RMS error of the collided fluence in the middle slice against light tracing ({photons} photons per grid), against run time, per grid and iteration cap, with and without the isotropic residuum.\n\n| grid | M | residuum | iterations run | ms | rel. error |\n|---:|---:|---|---:|---:|---:|\n"
+        );
+        for p in &points {
+            md.push_str(&format!(
+                "| {}³ | {} | {} | {} | {:.2} | {:.4} |\n",
+                p.grid,
+                p.iterations,
+                if p.residuum { "on" } else { "off" },
+                p.iterations_run,
+                p.propagation_ms,
+                p.error
+            ));
+        }
+        md.push_str("\nLight tracing against the reference (16³ tally):\n\n| ms | rel. error |\n|---:|---:|\n");
+        for (t, e) in &mc_points {
+            md.push_str(&format!("| {t:.1} | {e:.4} |\n"));
+        }
+        let md_path = report_dir.join(format!("{id}-pop.md"));
+        crate::cache::write_atomic(&md_path, md.as_bytes()).map_err(|e| out(&md_path, e.to_string()))?;
+        Ok(md)
+    }
+}
+
+/// elek2014 Sec. 5.4 as the paper measures it (Fig. 8): a thick, nearly conservative medium under an
+/// environment, every ordinate propagated to convergence against the switch at Eq. 10's `m'` with the
+/// ordinates' light merged into one isotropic grid. Grids of 16³ and the preset's ordinates; the
+/// difference is the relative RMS of the two images of the scattered light (48 × 48 px).
+fn env_residuum_bench(
+    id: &str,
+    table: &PopPresetTable,
+    medium: &crate::stages::pop::medium::VoxelMedium,
+) -> Result<(String, crate::bench::BenchRow), String> {
+    use crate::stages::pop::grid::NoOccluder;
+    let sky = environment::bundled_sky();
+    let ords = environment::ordinates(&sky, table.def.ordinates as usize, OrdinateSet::Importance);
+    let cam = crate::stages::pop::fig12::camera(48, 48).ok_or("the Fig. 12 camera could not be built")?;
+    let flow = preset_flow(table);
+    let cap = 20_000;
+    let mut out = Vec::new();
+    for residuum in [false, true] {
+        let settings = |grid: &Grid| {
+            let (mut s, _) = settings_for(table, grid);
+            s.eps_l = s.eps_l.min(1e-3);
+            if residuum {
+                Settings { iterations: cap, residuum: true, residuum_iterations: cap, ..s }
+            } else {
+                Settings { iterations: cap, residuum: false, ..s }
+            }
+        };
+        let opts = environment::EnvOptions {
+            dims: [16; 3],
+            merge_dims: [32; 3],
+            flow: &flow,
+            settings: &settings,
+            eye: cam.position,
+        };
+        let t0 = Instant::now();
+        let run = environment::propagate_environment(medium, &ords, &NoOccluder, &opts)?;
+        let t = ms(t0);
+        let img = render::march(&run.merged.0, &run.merged.1, medium, &cam, None, &MarchOptions::default()).radiance;
+        let aniso: usize = run.ordinates.iter().map(|(_, _, p)| p.anisotropic_iterations).sum();
+        let iso = run.residuum.as_ref().map_or(0, |(_, p)| p.isotropic_iterations)
+            + run.ordinates.iter().map(|(_, _, p)| p.isotropic_iterations).sum::<usize>();
+        out.push((t, img, aniso, iso));
+    }
+    let (e, d) = out[1].1.iter().zip(&out[0].1).fold((0.0, 0.0), |(e, d), (x, y)| {
+        (e + (0..3).map(|c| (x[c] - y[c]).powi(2)).sum::<f64>(), d + (0..3).map(|c| y[c] * y[c]).sum::<f64>())
+    });
+    let diff = if d > 0.0 { (e / d).sqrt() } else { 0.0 };
+    let speedup = out[0].0 / out[1].0.max(1e-9);
+    let line = format!(
+        "\nMerged isotropic residuum under the bundled sky (same cube, {} ordinates on 16³ grids, Sec. 5.4 / Fig. 8): every ordinate to convergence {} anisotropic iterations in all, {:.0} ms; switch then one merged isotropic grid: {} anisotropic + {} isotropic iterations, {:.0} ms; speed-up {speedup:.2}×, image difference {diff:.4} (rel. RMS)\n",
+        ords.len(),
+        out[0].2,
+        out[0].0,
+        out[1].2,
+        out[1].3,
+        out[1].0
+    );
+    let row = crate::bench::BenchRow {
+        what: format!("{id}: POP merged isotropic residuum vs every ordinate to convergence (environment)"),
+        baseline_ms: out[0].0,
+        candidate_ms: out[1].0,
+        speedup,
+        note: format!("images differ by {diff:.4} (rel. RMS); {} ordinates", ords.len()),
+    };
+    Ok((line, row))
+}
+
+impl PopRender {
+    /// `voltab bench --pop`: the stage's frame split into elek2014 Fig. 14's phases (median of 5 runs on
+    /// the current rayon pool) with the time per iteration; and the isotropic residuum's speed-up
+    /// (Sec. 5.4, Fig. 8) on a thick, nearly conservative cube (`σ_s = 20 /m`, albedo 0.999, g = 0.95,
+    /// the preset's grid): converged anisotropic propagation against the switch at Eq. 10's `m'`, with the
+    /// relative RMS difference of their collided fluence.
+    pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<crate::bench::BenchRow>), StageError> {
+        use crate::stages::pop::{grid::NoOccluder, medium::VoxelMedium};
+        let fields = self.fields();
+        let table = self.open_table(id, ctx)?;
+        let v = fields.load(id, ctx, None)?;
+        let media = self.media(id, ctx, &v.scene, &v.bvh)?;
+        let distance: Vec<f64> = v.gbuffer.distance.data.iter().map(|&d| f64::from(d)).collect();
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
+        let mut runs = Vec::new();
+        for _ in 0..5 {
+            runs.push(
+                render_frame(&media, &v.bvh, &table, &v.gbuffer.camera, &distance, self.range_sigma, ctx.device)
+                    .map_err(fail)?,
+            );
+        }
+        let median = |f: &dyn Fn(&PopFrame) -> f64| {
+            let mut x: Vec<f64> = runs.iter().map(f).collect();
+            x.sort_by(f64::total_cmp);
+            x[x.len() / 2]
+        };
+        let sum = |f: fn(&LightRun) -> f64| move |fr: &PopFrame| fr.lights.iter().map(f).sum::<f64>();
+        let grid_ms = median(&sum(|l| l.grid_ms));
+        let init = median(&sum(|l| l.phases_ms.initialisation));
+        let prop = median(&sum(|l| l.phases_ms.propagation));
+        let res = median(&sum(|l| l.phases_ms.residuum));
+        let merge_ms = median(&sum(|l| l.merge_ms));
+        let march = median(&|f: &PopFrame| f.march_ms);
+        let ordinates_ms = median(&|f: &PopFrame| f.environment.as_ref().map_or(0.0, |e| e.ordinates_ms));
+        let importance_ms = median(&|f: &PopFrame| f.environment.as_ref().map_or(0.0, |e| e.importance_ms));
+        let merge_ms = merge_ms + median(&|f: &PopFrame| f.environment.as_ref().map_or(0.0, |e| e.merge_ms));
+        let l = &runs[0].lights;
+        let env_count = l.iter().filter(|r| r.kind == "environment").count();
+        let mut names: Vec<String> =
+            l.iter().filter(|r| r.kind != "environment").map(|r| format!("{} ({})", r.light, r.kind)).collect();
+        if env_count > 0 {
+            names.push(format!("{env_count} environment ordinates"));
+        }
+        let iters: usize = l.iter().map(|r| r.anisotropic_iterations).sum();
+        let iso: usize = l.iter().map(|r| r.isotropic_iterations).sum();
+        let (w, h) = (v.gbuffer.camera.width, v.gbuffer.camera.height);
+        let mut text = format!(
+            "{id}: elek2014 POP, preset grid {:?}, {}×{}, {} threads (median of 5)\n\n| phase (Fig. 14) | ms |\n|---|---:|\n| importance propagation + projection (Sec. 5.2) | {importance_ms:.2} |\n| ordinates from the environment map (Sec. 5.1) | {ordinates_ms:.2} |\n| lights | {} |\n| grid + medium downsampling | {grid_ms:.2} |\n| initialisation (point lights: depth map + radial sweep) | {init:.2} |\n| propagation ({iters} iterations, {:.3} ms each) | {prop:.2} |\n| residuum ({iso} iterations) | {res:.2} |\n| merge radial and environment grids into the render grid (Sec. 5.3) | {merge_ms:.2} |\n| upsample + ray march | {march:.1} |\n| frame | {:.1} |\n",
+            table.def.grid,
+            w,
+            h,
+            rayon::current_num_threads(),
+            names.join(", "),
+            prop / iters.max(1) as f64,
+            importance_ms + ordinates_ms + grid_ms + init + prop + res + merge_ms + march
+        );
+        // The residuum on a thick, nearly conservative cube.
+        let n = table.def.grid.map(|v| v as usize);
+        let medium = VoxelMedium::homogeneous(glam::DVec3::ZERO, glam::DVec3::ONE, ([20.0; 3], [0.02; 3], [0.95; 3]))
+            .map_err(fail)?;
+        let light = crate::stages::pop::fig12::light();
+        let grid = Grid::new(&medium, light.direction, n, &NoOccluder).map_err(fail)?;
+        let (mut settings, flow) = settings_for(&table, &grid);
+        settings.eps_l = settings.eps_l.min(1e-3);
+        let cap = 20_000;
+        let full = Settings { iterations: cap, residuum: false, ..settings.clone() };
+        let switched = Settings { iterations: cap, residuum: true, residuum_iterations: cap, ..settings.clone() };
+        let t0 = Instant::now();
+        let a = propagate::propagate(&grid, &light, &NoOccluder, &flow, &full, Observer::ThetaBins(1));
+        let full_ms = ms(t0);
+        let t0 = Instant::now();
+        let b = propagate::propagate(&grid, &light, &NoOccluder, &flow, &switched, Observer::ThetaBins(1));
+        let switched_ms = ms(t0);
+        let (mut e, mut d) = (0.0, 0.0);
+        for (x, y) in b.fluence.iter().zip(&a.fluence) {
+            e += (x[0] - y[0]).powi(2);
+            d += y[0] * y[0];
+        }
+        let diff = if d > 0.0 { (e / d).sqrt() } else { 0.0 };
+        text.push_str(&format!(
+            "\nIsotropic residuum (cube σ_s = 20 /m, albedo 0.999, g = 0.95, grid {n:?}, ε_L = {}): anisotropic to convergence {} iterations {full_ms:.1} ms; switch at m' = {} then {} isotropic iterations {switched_ms:.1} ms; speed-up {:.2}×, fluence difference {:.4} (rel. RMS)\n",
+            settings.eps_l,
+            a.anisotropic_iterations,
+            b.anisotropic_iterations,
+            b.isotropic_iterations,
+            full_ms / switched_ms.max(1e-9),
+            diff
+        ));
+        let mut rows = vec![crate::bench::BenchRow {
+            what: format!("{id}: POP isotropic residuum vs anisotropic propagation to convergence"),
+            baseline_ms: full_ms,
+            candidate_ms: switched_ms,
+            speedup: full_ms / switched_ms.max(1e-9),
+            note: format!("fluence differs by {diff:.4} (rel. RMS); Eq. 10 m' = {}", settings.switch_iteration),
+        }];
+        // The same cube under the bundled sky: the residuum merged across the environment's grids (once,
+        // for the stages that light with an environment).
+        if !self.environment.is_empty() {
+            let (line, row) = env_residuum_bench(id, &table, &medium).map_err(fail)?;
+            text.push_str(&line);
+            rows.push(row);
+        }
+        Ok((text, rows))
+    }
+    /// `voltab bench --gpu`: the stage's frame with the propagation on the CPU and on `ctx.device`
+    /// side by side (median of 3 each), the GPU time of every pass kind, and how far the GPU frame's
+    /// scattered light is from the CPU's.
+    pub fn bench_gpu(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<crate::bench::BenchRow>), StageError> {
+        let fields = self.fields();
+        let table = self.open_table(id, ctx)?;
+        let v = fields.load(id, ctx, None)?;
+        let media = self.media(id, ctx, &v.scene, &v.bvh)?;
+        let distance: Vec<f64> = v.gbuffer.distance.data.iter().map(|&d| f64::from(d)).collect();
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the scene".into() };
+        let cam = &v.gbuffer.camera;
+        let frames = |device: &crate::render::gpu::Device| -> Result<Vec<PopFrame>, StageError> {
+            (0..3)
+                .map(|_| render_frame(&media, &v.bvh, &table, cam, &distance, self.range_sigma, device).map_err(fail))
+                .collect()
+        };
+        let cpu = frames(&crate::render::gpu::Device::Cpu)?;
+        let gpu = frames(ctx.device)?;
+        let median = |runs: &[PopFrame], f: fn(&LightRun) -> f64| {
+            let mut x: Vec<f64> = runs.iter().map(|r| r.lights.iter().map(f).sum::<f64>()).collect();
+            x.sort_by(f64::total_cmp);
+            x[x.len() / 2]
+        };
+        let iterate = |l: &LightRun| l.phases_ms.propagation + l.phases_ms.residuum;
+        let (cpu_ms, gpu_ms) = (median(&cpu, iterate), median(&gpu, iterate));
+        let diff = crate::render::rel_rmse(&gpu[0].scattered, &cpu[0].scattered);
+        let mut text = format!(
+            "POP on {} ({}×{}, grid {:?}): iterations + accumulation CPU {cpu_ms:.2} ms, {} {gpu_ms:.2} ms ({:.2}×); scattered light differs by {diff:.2e} (rel. RMS)\nGPU passes (median-frame light 0):\n",
+            fields.scene_path(ctx.base_dir).display(),
+            cam.width,
+            cam.height,
+            table.def.grid,
+            ctx.device.name(),
+            cpu_ms / gpu_ms.max(1e-9),
+        );
+        if let Some(l) = gpu[0].lights.first() {
+            for p in &l.gpu_passes {
+                text.push_str(&format!("  {:<24} {:>3} passes {:>9.3} ms\n", p.phase, p.passes, 1e3 * p.seconds));
+            }
+        }
+        let rows = vec![crate::bench::BenchRow {
+            what: format!("{id}: POP iterations, CPU vs {}", ctx.device.name()),
+            baseline_ms: cpu_ms,
+            candidate_ms: gpu_ms,
+            speedup: cpu_ms / gpu_ms.max(1e-9),
+            note: format!("scattered light differs by {diff:.2e} (rel. RMS)"),
+        }];
+        Ok((text, rows))
+    }
+}
