@@ -21,11 +21,11 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use voltab::reference::translucent::{self as reference, ReferenceOptions};
 use voltab::render::ViewCamera;
 use voltab::scene::Scene;
 use voltab::scene::bvh::SceneBvh;
 use voltab::stages::translucent::points::PointOptions;
-use voltab::stages::translucent::reference::{self, ReferenceOptions};
 use voltab::stages::translucent::render::{self, RenderOptions};
 use voltab::stages::translucent::{Material, Setup, emitters, find_object};
 use voltab::tables::ms_lobes::MsLobesTable;

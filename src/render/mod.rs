@@ -16,6 +16,7 @@
 
 pub mod gbuffer;
 pub mod gpu;
+pub mod optics;
 
 use glam::DVec3;
 

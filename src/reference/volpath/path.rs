@@ -61,6 +61,7 @@ use super::flight::{self, Flight};
 use super::lights::{self, LightSample, PreparedLight};
 use crate::physics::hg;
 use crate::physics::rng::{Draws, SampleStream};
+use crate::render::optics::fresnel_cos;
 use crate::scene::Scene;
 use crate::scene::bvh::{Hit, MediumSegment, Ray, SceneBvh, SurfaceResponse as SurfaceKind};
 
@@ -515,7 +516,7 @@ impl<'a> Context<'a> {
                     let eta = eta_from / eta_to;
                     let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
                     let fresnel =
-                        if sin2_t >= 1.0 { 1.0 } else { fresnel(cos_i, (1.0 - sin2_t).sqrt(), eta_from, eta_to) };
+                        if sin2_t >= 1.0 { 1.0 } else { fresnel_cos(cos_i, (1.0 - sin2_t).sqrt(), eta_from, eta_to) };
                     if xi < fresnel {
                         dir = (dir + 2.0 * cos_i * side).normalize();
                         origin = p + side * self.eps(p);
@@ -624,13 +625,4 @@ impl<'a> Context<'a> {
             }
         }
     }
-}
-
-/// Unpolarised Fresnel reflectance of a smooth dielectric interface (cosines of the incident and
-/// transmitted angles, indices of both sides).
-fn fresnel(cos_i: f64, cos_t: f64, eta_i: f64, eta_t: f64) -> f64 {
-    let rs = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t);
-    let rp = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
-    let f = 0.5 * (rs * rs + rp * rp);
-    if f.is_finite() { f.clamp(0.0, 1.0) } else { 1.0 }
 }

@@ -19,8 +19,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::reference::ReferenceImage;
 use super::render::Frame;
+use crate::reference::translucent::ReferenceImage;
 
 /// The point-based frame against the reference.
 #[derive(Debug, Clone, Serialize, Deserialize)]

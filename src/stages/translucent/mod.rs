@@ -39,7 +39,6 @@ pub mod lowres;
 pub mod object_light;
 pub mod octree;
 pub mod points;
-pub mod reference;
 pub mod render;
 #[cfg(test)]
 mod render_tests;
@@ -202,71 +201,9 @@ pub fn find_object(scene: &Scene, bvh: &SceneBvh) -> Option<(usize, f64)> {
     })
 }
 
-/// Unpolarised Fresnel reflectance of a smooth interface for light arriving with `cos_i = |cos θ_i|`
-/// from the side of index `eta_i` toward index `eta_t`; 1 under total internal reflection.
-pub fn fresnel(cos_i: f64, eta_i: f64, eta_t: f64) -> f64 {
-    if eta_i == eta_t {
-        return 0.0; // index-matched: no interface (and no 0/0 at grazing incidence)
-    }
-    let cos_i = cos_i.clamp(0.0, 1.0);
-    let sin2_t = (eta_i / eta_t).powi(2) * (1.0 - cos_i * cos_i);
-    if sin2_t >= 1.0 {
-        return 1.0;
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
-    let rs = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t);
-    let rp = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
-    (0.5 * (rs * rs + rp * rp)).clamp(0.0, 1.0)
-}
-
-/// Refracts the unit direction `d` at a surface with unit normal `n` (either orientation) going from
-/// index `eta_i` to `eta_t`; `None` under total internal reflection.
-pub fn refract(d: DVec3, n: DVec3, eta_i: f64, eta_t: f64) -> Option<DVec3> {
-    let n = if d.dot(n) > 0.0 { -n } else { n };
-    let cos_i = (-d.dot(n)).clamp(0.0, 1.0);
-    let eta = eta_i / eta_t;
-    let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
-    if sin2_t >= 1.0 {
-        return None;
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
-    Some((eta * d + (eta * cos_i - cos_t) * n).normalize())
-}
-
-/// Mirror reflection of `d` about the plane with normal `n`.
-pub fn reflect(d: DVec3, n: DVec3) -> DVec3 {
-    d - 2.0 * d.dot(n) * n
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fresnel_limits() {
-        // Normal incidence: ((n1 − n2)/(n1 + n2))² = 0.04 for 1 → 1.5.
-        assert!((fresnel(1.0, 1.0, 1.5) - 0.04).abs() < 1e-12);
-        assert!((fresnel(1.0, 1.5, 1.0) - 0.04).abs() < 1e-12);
-        // Grazing: total reflection; index matched: none.
-        assert!((fresnel(0.0, 1.0, 1.5) - 1.0).abs() < 1e-12);
-        assert!(fresnel(0.3, 1.3, 1.3) < 1e-15);
-        // Beyond the critical angle asin(1/1.5) from inside.
-        let cos_c = (1.0 - 1.0 / 2.25f64).sqrt();
-        assert_eq!(fresnel(cos_c - 1e-6, 1.5, 1.0), 1.0);
-        assert!(fresnel(cos_c + 1e-3, 1.5, 1.0) < 1.0);
-    }
-
-    #[test]
-    fn refraction_obeys_snell_and_reversibility() {
-        let n = DVec3::Z;
-        let d = DVec3::new(0.6, 0.0, -0.8);
-        let t = refract(d, n, 1.0, 1.5).unwrap();
-        let (sin_i, sin_t) = (d.x.abs(), t.x.abs());
-        assert!((sin_i - 1.5 * sin_t).abs() < 1e-12);
-        let back = refract(-t, n, 1.5, 1.0).unwrap();
-        assert!((back + d).length() < 1e-12);
-        assert!(refract(DVec3::new(0.9, 0.0, 0.43589).normalize(), n, 1.5, 1.0).is_none());
-    }
 
     #[test]
     fn emitter_intersection_and_intensity() {

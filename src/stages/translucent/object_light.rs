@@ -35,10 +35,11 @@ use std::f64::consts::PI;
 
 use glam::DVec3;
 
+use super::Setup;
 use super::points::VolumeSample;
-use super::{Setup, fresnel, reflect, refract};
 use crate::physics::hg;
 use crate::physics::rng::{Draws, SampleStream};
+use crate::render::optics::{fresnel, reflect, refract};
 use crate::scene::Surface;
 use crate::scene::bvh::Ray;
 

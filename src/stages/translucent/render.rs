@@ -79,10 +79,11 @@ use super::lowres::{self, Plan, SegmentShape};
 use super::object_light::ObjectLight;
 use super::octree::{CutEntry, Item, Octree};
 use super::points::{PointOptions, Points, SurfaceSample, VolumeSample};
-use super::{Material, Setup, fresnel, reflect, refract};
+use super::{Material, Setup};
 use crate::physics::hg::phase;
 use crate::physics::rng::StreamKey;
 use crate::render::ViewCamera;
+use crate::render::optics::{fresnel, reflect, refract};
 use crate::scene::bvh::Ray;
 use crate::tables::ms_lobes::{LobeSlice, MediumChannel, MsLobesTable};
 

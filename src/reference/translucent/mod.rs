@@ -1,7 +1,7 @@
 //! Brute-force volumetric path tracer for a homogeneous medium inside a smooth dielectric mesh: the
-//! independent ground truth the point-based renderer ([`super::render`]) is judged against.
+//! independent ground truth the point-based renderer ([`crate::stages::translucent::render`]) is judged against.
 //!
-//! **Input → output.** A [`Setup`] (scene, BVH, translucent mesh, its [`super::Material`], spherical
+//! **Input → output.** A [`Setup`] (scene, BVH, translucent mesh, its [`crate::stages::translucent::Material`], spherical
 //! [`Emitter`]s), a [`ViewCamera`] and [`ReferenceOptions`] → a [`ReferenceImage`]: per pixel the mean
 //! radiance \[W/(m²·sr)\] split by the number of scattering events in the medium (none, one, two, three
 //! or more), the variance of the mean of the total, and whether the pixel sees the object first. It
@@ -71,7 +71,7 @@
 //! pixel's paths are accumulated in order, so images are bit-identical for any thread count. A path
 //! whose contribution is not finite is dropped and counted in [`ReferenceImage::nonfinite`]; a pixel
 //! whose ray has a non-finite or zero origin or direction gets 0 and all its paths count as non-finite.
-//! An invalid material ([`super::Material::check`]) gives an image of zeros with every path counted as
+//! An invalid material ([`crate::stages::translucent::Material::check`]) gives an image of zeros with every path counted as
 //! non-finite. Invalid emitters (non-finite, radius ≤ 0, negative radiance) are ignored.
 
 use std::f64::consts::PI;
@@ -81,11 +81,12 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::{Emitter, Material, Setup, fresnel, reflect, refract};
 use crate::physics::hg;
 use crate::physics::rng::{Draws, StreamKey};
 use crate::render::ViewCamera;
+use crate::render::optics::{fresnel, reflect, refract};
 use crate::scene::bvh::{Hit, Ray};
+use crate::stages::translucent::{Emitter, Material, Setup};
 
 /// Fixed-point iterations of the light-guided direction through the refractive boundary.
 pub const GUIDE_ITERATIONS: usize = 3;
@@ -990,7 +991,7 @@ mod tests {
             radiance: [1.0, 2.0, 3.0],
         });
         let bvh = SceneBvh::build(&s);
-        let (object, ior) = super::super::find_object(&s, &bvh).unwrap();
+        let (object, ior) = crate::stages::translucent::find_object(&s, &bvh).unwrap();
         let md = &s.media[0];
         let m = Material {
             sigma_t: [0, 1, 2].map(|c| md.sigma_s[c] + md.sigma_a[c]),
@@ -998,7 +999,7 @@ mod tests {
             g: md.g[0],
             ior,
         };
-        let (em, skipped) = super::super::emitters(&s, 0.02);
+        let (em, skipped) = crate::stages::translucent::emitters(&s, 0.02);
         assert!(skipped.is_empty() && em.len() == 1);
         let cam = ViewCamera::new([0.0, 0.0, 3.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 0.1, 3, 1).unwrap();
         let setup = Setup { scene: &s, bvh: &bvh, object, material: m, emitters: &em };
@@ -1160,8 +1161,8 @@ mod tests {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/translucent.gltf");
         let scene = Scene::load(&path).unwrap();
         let bvh = SceneBvh::build(&scene);
-        let (object, _) = super::super::find_object(&scene, &bvh).unwrap();
-        let (em, _) = super::super::emitters(&scene, 0.02);
+        let (object, _) = crate::stages::translucent::find_object(&scene, &bvh).unwrap();
+        let (em, _) = crate::stages::translucent::emitters(&scene, 0.02);
         let cam = ViewCamera::from_scene(&scene.cameras[0], 96, 64).unwrap();
         let spp: u32 = std::env::var("VOLTAB_REF_SPP").ok().and_then(|v| v.parse().ok()).unwrap_or(64);
         for name in ["Wax", "Oil", "Skin"] {
