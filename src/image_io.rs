@@ -23,8 +23,7 @@ use std::path::{Path, PathBuf};
 
 use crate::cache::{CacheError, write_atomic};
 
-/// Rec. 709 / sRGB luminance weights (ITU-R BT.709-6 Item 3.3).
-pub const REC709_LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
+pub use crate::render::color::REC709_LUMA;
 
 /// Pre-shoulder value the 99th-percentile luminance is exposed to.
 pub const PREVIEW_KEY: f64 = 0.8;

@@ -14,6 +14,7 @@
 //! downwards, images are row-major (`data[y · width + x]`), distances are metres along the unit view ray
 //! (`f32::INFINITY` for sky pixels), colours are linear RGB radiance \[W/(m²·sr)\].
 
+pub mod color;
 pub mod gbuffer;
 pub mod gpu;
 pub mod optics;

@@ -252,7 +252,7 @@ pub fn path_trace(
     media: bool,
 ) -> (RgbImage, f64, f64) {
     let est = path_trace_pixels(scene, bvh, cam, samples, depth, media);
-    let lum = |c: [f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+    let lum = crate::render::color::luminance;
     let (mut se, mut m, mut var, mut sq) = (0.0, 0.0, 0.0, 0.0);
     for e in &est {
         se += lum(e.1);

@@ -15,6 +15,7 @@
 //! emissive triangles on their front (counter-clockwise) side. A directional light's angular size is
 //! ignored (a delta direction).
 
+use crate::render::color::luminance;
 use crate::scene::{LightKind, Mesh, Scene};
 
 /// A point on an area light sampled by area: a differential patch.
@@ -98,9 +99,6 @@ pub struct BakeLights {
     /// Cumulative selection probabilities of `areas` (proportional to power).
     area_cdf: Vec<f64>,
 }
-
-/// Rec. 709 luminance weights: the power used to choose among area lights.
-pub const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
 
 impl BakeLights {
     /// Prepares `scene`'s lights. Lights with zero power, degenerate shapes or non-finite values are left
@@ -257,7 +255,7 @@ impl BakeLights {
 }
 
 fn power(a: &Area) -> f64 {
-    a.area * (LUMINANCE[0] * a.radiance[0] + LUMINANCE[1] * a.radiance[1] + LUMINANCE[2] * a.radiance[2])
+    a.area * luminance(a.radiance)
 }
 
 /// A world triangle and its unit geometric normal.

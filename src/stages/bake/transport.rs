@@ -36,7 +36,7 @@
 //! area-light point and the bounce direction); deeper bounces use plain counter-based uniforms.
 
 use super::BakeMode;
-use super::lights::{BakeLights, LUMINANCE, Patch, Source, dot, frame, norm, sub, unit};
+use super::lights::{BakeLights, Patch, Source, dot, frame, norm, sub, unit};
 use crate::physics::rng::{SampleStream, StreamKey};
 use crate::scene::bvh::{Hit, Ray, SceneBvh, optical_thickness};
 use crate::scene::{Boundary, Scene, Surface};
@@ -651,10 +651,7 @@ impl<'a> Transport<'a> {
     }
 }
 
-/// Rec. 709 luminance.
-pub fn luminance(c: [f64; 3]) -> f64 {
-    LUMINANCE[0] * c[0] + LUMINANCE[1] * c[1] + LUMINANCE[2] * c[2]
-}
+pub use crate::render::color::luminance;
 
 /// `x` moved `eps` along `n`.
 fn offset(x: [f64; 3], n: [f64; 3], eps: f64) -> [f64; 3] {

@@ -152,10 +152,6 @@ fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
     t * t * (3.0 - 2.0 * t)
 }
 
-fn luminance(c: [f32; 3]) -> f32 {
-    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
-}
-
 /// Clamp-to-edge 4-tap down-sampling of a `w × h` buffer of `N` floats per texel.
 fn downsample<const N: usize>(src: &[[f32; N]], w: usize, h: usize) -> (Vec<[f32; N]>, usize, usize) {
     let nw = w.div_ceil(2).max(1);
@@ -211,7 +207,7 @@ pub fn build_chain(l: &RgbImage, spread: &Image<f32>, opts: &FogOptions) -> MipC
         .zip(spread.data.par_iter())
         .map(|(c, &s)| {
             let y = match opts.spread_chain {
-                SpreadChain::LuminanceWeighted => luminance(*c).max(0.0),
+                SpreadChain::LuminanceWeighted => crate::render::color::luminance_f32(*c).max(0.0),
                 SpreadChain::Gaussian => 1.0,
             };
             [y * s, y, s]

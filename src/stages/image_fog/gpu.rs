@@ -200,8 +200,7 @@ fn run(gpu: &Gpu, src: Level0<'_>, opts: &FogOptions, read_chain: bool) -> Resul
                 .iter()
                 .zip(&spread.data)
                 .map(|(c, &s)| {
-                    let y =
-                        if luminance_weighted { (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]).max(0.0) } else { 1.0 };
+                    let y = if luminance_weighted { crate::render::color::luminance_f32(*c).max(0.0) } else { 1.0 };
                     [y * s, y, s, 0.0]
                 })
                 .collect();

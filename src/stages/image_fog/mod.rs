@@ -287,7 +287,7 @@ pub fn filter_with_separation(
         .par_iter()
         .zip(spread.data.par_iter())
         .map(|(c, &w)| {
-            let y = 0.2126 * c[0] as f64 + 0.7152 * c[1] as f64 + 0.0722 * c[2] as f64;
+            let y = crate::render::color::luminance([c[0] as f64, c[1] as f64, c[2] as f64]);
             let m = smooth(sep.luminance, sep.luminance + sep.luminance_width, y)
                 * (1.0 - smooth(sep.spread - sep.spread_width, sep.spread, w as f64));
             m as f32

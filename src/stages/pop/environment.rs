@@ -57,19 +57,14 @@ use crate::tables::pop_preset::ordinates::fibonacci_directions;
 /// Largest map side accepted (a 16k × 8k float map is 1.5 GiB as f64 RGB).
 pub const MAX_SIDE: usize = 16_384;
 
-/// Rec. 709 luminance weights, the importance of a texel's radiance.
-const LUMINANCE: Rgb = [0.2126, 0.7152, 0.0722];
-
 /// Share of [`EnvSampler`]'s probability spread uniformly over the sphere.
 const UNIFORM_SHARE: f64 = 0.1;
 
 /// `1/Φ` (Φ the golden ratio): the second coordinate of the Fibonacci lattice.
 const INV_PHI: f64 = 0.618_033_988_749_894_8;
 
-/// Luminance of an RGB radiance.
-pub fn luminance(v: Rgb) -> f64 {
-    LUMINANCE[0] * v[0] + LUMINANCE[1] * v[1] + LUMINANCE[2] * v[2]
-}
+/// Luminance of an RGB radiance: the importance of a texel.
+pub use crate::render::color::luminance;
 
 /// A latitude–longitude environment map of radiance \[W/(m² sr)\] (module doc for the convention).
 #[derive(Debug, Clone, PartialEq)]

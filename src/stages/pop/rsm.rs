@@ -41,6 +41,7 @@ use super::grid::Rgb;
 use super::medium::{DirectionalLight, VoxelMedium};
 use super::octa;
 use super::radial_propagate::PointLight;
+use crate::render::color::luminance;
 use crate::scene::Scene;
 use crate::scene::bvh::{Ray, SceneBvh, SurfaceResponse};
 
@@ -196,11 +197,6 @@ pub fn point_rsm(
             texel(albedo, bvh, medium, (light.position, w), light.intensity.map(|i| i * f))
         })
         .collect()
-}
-
-/// Relative luminance (Rec. 709) of an RGB triple.
-fn luminance(c: Rgb) -> f64 {
-    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
 }
 
 /// `k` Lambertian VPLs from the maps (module doc), each lifted `lift` off its surface along the normal so
