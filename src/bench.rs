@@ -9,27 +9,13 @@
 
 use std::time::Instant;
 
-use serde::Serialize;
-
 use crate::compile::{CompileError, CompileOptions, compile, encode_table};
 use crate::container::ContainerError;
 use crate::pipeline::{Limits, ValidatedPipeline};
 use crate::tables::TableDef;
 
-/// One measured comparison.
-#[derive(Debug, Clone, Serialize)]
-pub struct BenchRow {
-    /// What is compared.
-    pub what: String,
-    /// Baseline, ms.
-    pub baseline_ms: f64,
-    /// Candidate, ms.
-    pub candidate_ms: f64,
-    /// baseline / candidate (> 1: candidate is faster).
-    pub speedup: f64,
-    /// Extra note (sizes).
-    pub note: String,
-}
+/// One measured comparison (defined beside the stages, which measure most of them).
+pub use crate::stages::BenchRow;
 
 /// Bench failure.
 #[derive(Debug, thiserror::Error)]

@@ -17,18 +17,25 @@
 //!
 //! Module map:
 //! - [`pipeline`]: RON language, diagnostics, includes/presets/overrides, validation, schema.
-//! - [`tables`]: one module per table kind (`phase_hg`), each with its error estimates.
+//! - [`tables`]: one module per table kind (`phase_hg`, `zh_response`, `ms_lobes`, `pop_preset`), each
+//!   with its error estimates.
 //! - [`container`]: the `.vtab` format: header, chunks, transforms, zstd, checksums, reader, diff.
 //! - [`cache`]: content keys, atomic writes, the locked output folder.
 //! - [`compile`]: parallel, incremental compilation with progress and sidecars.
-//! - [`stages`]: consumers of tables (`plot_phase`).
+//! - [`plan`]: (pipeline, scenes) → the tables and slices the scenes need.
+//! - [`stages`]: consumers of tables, one folder per technique (`bake`, `god_rays`, `image_fog`,
+//!   `pop`, `translucent`, plus `plot_phase`): the stage, its algorithm, its GPU twin and shaders.
+//! - [`render`]: the floor under the techniques: images, camera, G-buffer, luminance, optics, GPU context.
+//! - [`scene`]: glTF/USD import into one scene model, checks, BVH ray queries.
+//! - [`image_io`]: EXR and PNG output.
 //! - [`physics`]: phase functions and counter-based random streams (one home per concept).
 //! - [`reference`](mod@reference): independent high-precision references the tables are judged against.
 //! - [`report`]: error-against-run-time reports and plots.
 //! - [`bench`](mod@bench): timings measured side by side, printed as ratios.
 //! - [`stability`]: the extreme-input matrix every formula must survive.
 //!
-//! Papers: elek2014 (POP; F_hg cumulative), dubouchet2019 (ZH convention) — see
+//! Papers: dubouchet2019 (ZH tables, bake), wang2018 (lobe tables, translucent), elek2014 (POP),
+//! baran2010 (god rays), iser2018 (image fog) — see
 //! `../shared/papers/` and each module's header for the equations it implements.
 
 pub mod bench;

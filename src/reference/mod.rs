@@ -6,8 +6,6 @@
 pub mod beam_adjoint;
 pub mod grid_mc;
 pub mod hg_hp;
-/// Brute-force volumetric path tracer of a homogeneous medium inside a smooth dielectric mesh
-/// (the translucent stage's ground truth).
 pub mod translucent;
 /// Brute-force volumetric path tracer: surface irradiance with volume-to-surface transport.
 pub mod volpath;

@@ -1,14 +1,14 @@
-//! Screen-space real-time effects and the image types they share.
+//! The render floor: what every technique's stage stands on — image and camera types, the G-buffer,
+//! colour, optics and the GPU context.
 //!
-//! **Input → output.** Per-pixel buffers of a camera view (an HDR colour image, the distance along each
-//! pixel's view ray) plus a light and a medium → an image with the effect applied. The buffers come from
-//! voltab's own ray tracer ([`gbuffer`]) so the effects run on any imported scene, or from EXR files of
-//! another renderer.
+//! **Input → output.** A scene and a camera → per-pixel buffers (an HDR colour image, the distance
+//! along each pixel's view ray: [`gbuffer`]), which the techniques in `crate::stages` turn into their
+//! images; or EXR files of another renderer in their place.
 //!
-//! - [`epipolar`]: baran2010, shadowed single scattering (god rays) by epipolar rectification and
-//!   partial-sum trees, with brute-force ray-marching references.
-//! - [`image_fog`]: iser2018, analytic quasi-heterogeneous fog with hierarchical image-space filtering
-//!   of multiple scattering, with the gathering-filter reference.
+//! - [`gbuffer`]: scene + camera → distance and vacuum colour buffers.
+//! - [`color`]: Rec. 709 luminance (one home).
+//! - [`optics`]: Fresnel reflectance, refraction, reflection at smooth dielectric interfaces (one home).
+//! - [`gpu`]: device choice, wgpu context, shader validation (the passes live with their techniques).
 //!
 //! Conventions shared by every effect: pixel `(x, y)` has its centre at `(x + ½, y + ½)`, `y` grows
 //! downwards, images are row-major (`data[y · width + x]`), distances are metres along the unit view ray

@@ -19,6 +19,21 @@ use serde::{Deserialize, Serialize};
 
 use crate::tables::FieldIssue;
 
+/// One measured comparison.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchRow {
+    /// What is compared.
+    pub what: String,
+    /// Baseline, ms.
+    pub baseline_ms: f64,
+    /// Candidate, ms.
+    pub candidate_ms: f64,
+    /// baseline / candidate (> 1: candidate is faster).
+    pub speedup: f64,
+    /// Extra note (sizes).
+    pub note: String,
+}
+
 /// A stage entry as written in a pipeline file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[non_exhaustive]
@@ -227,7 +242,7 @@ impl StageDef {
         &self,
         id: &str,
         ctx: &StageContext,
-    ) -> Result<Option<(String, Vec<crate::bench::BenchRow>)>, StageError> {
+    ) -> Result<Option<(String, Vec<crate::stages::BenchRow>)>, StageError> {
         match self {
             StageDef::PopRender(p) => p.bench_gpu(id, ctx).map(Some),
             StageDef::EpipolarShadows(e) => e.bench_gpu(id, ctx).map(Some),

@@ -1,4 +1,5 @@
-//! The GPU path of the real-time effects (issue 10): WGSL compute shaders driven through `wgpu`.
+//! The GPU floor of the real-time techniques: device choice and the `wgpu` context their WGSL compute
+//! passes (in `stages/<technique>/gpu.rs`) run on.
 //!
 //! **Input → output.** The same inputs as the CPU effects (a POP grid and flow table, an epipolar
 //! frame's rectified slices, an image-fog frame's scattered image and spread) → the same outputs,
@@ -8,12 +9,12 @@
 //! | module | pass | paper |
 //! |---|---|---|
 //! | [`context`] | adapter and device, buffers, chunked dispatch, timing, error capture | — |
-//! | [`shaders`] | the `.wgsl` sources under `src/stages/*/shaders/`, validated by naga | — |
-//! | [`epipolar`] | god rays: depth rectification, shadow-map depth modes, per-slice Fenwick sweep (one thread per slice), unrectification with the ring march; slice layout and SVD on the CPU | baran2010 Secs. 3–9 |
-//! | [`fog`] | image-space fog: per-pixel density integrals, `L_at`, `L_sc` and spread; MIP chain (masked 4-tap, colour + spread chains), level selection and B-spline fetch, compose | iser2018 Secs. 3.3, 4.1–4.4 |
-//! | [`pop`] | POP gathering iteration (Eqs. 2–6) and accumulation toward the eye (Eqs. 7–8) | elek2014 Secs. 4.2–4.3, 5.4 |
+//! | [`shaders`] | the shader type and its naga validation; the `.wgsl` sources live in `src/stages/<technique>/shaders/` | — |
+//! | `stages::god_rays::gpu` | god rays: depth rectification, shadow-map depth modes, per-slice Fenwick sweep (one thread per slice), unrectification with the ring march; slice layout and SVD on the CPU | baran2010 Secs. 3–9 |
+//! | `stages::image_fog::gpu` | image-space fog: per-pixel density integrals, `L_at`, `L_sc` and spread; MIP chain (masked 4-tap, colour + spread chains), level selection and B-spline fetch, compose | iser2018 Secs. 3.3, 4.1–4.4 |
+//! | `stages::pop::gpu` | POP gathering iteration (Eqs. 2–6) and accumulation toward the eye (Eqs. 7–8) | elek2014 Secs. 4.2–4.3, 5.4 |
 //!
-//! The CPU implementations in [`crate::render`] are the ground truth: every GPU pass has a test
+//! The CPU implementations in `crate::stages` are the ground truth: every GPU pass has a test
 //! that runs it on the bundled scenes and compares it with the CPU result within a stated
 //! tolerance (f32 on the GPU against the CPU's f64 or f32, and a different summation order).
 //!

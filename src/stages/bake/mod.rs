@@ -429,7 +429,7 @@ impl BakeLightmaps {
     /// `voltab bench --bake`: every mode over the whole atlas at this stage's quality (texels/s, rays/s,
     /// overhead of Shadow and Full over Surface measured in one run), and the speed-up of the Full bake
     /// over the brute-force reference at equal error on a 256-texel subset (the [`report::ladder`]).
-    pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<Vec<crate::bench::BenchRow>, StageError> {
+    pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<Vec<crate::stages::BenchRow>, StageError> {
         let fail =
             |message: String| StageError::Input { stage: id.into(), message, help: "fix the stage's inputs".into() };
         let Prepared { scene, bvh, table, atlas, points, .. } = self.prepare(id, ctx)?;
@@ -444,10 +444,10 @@ impl BakeLightmaps {
             timed.push((mode, ms, rays));
         }
         let (_, surface_ms, _) = timed[0];
-        let mut rows: Vec<crate::bench::BenchRow> = timed
+        let mut rows: Vec<crate::stages::BenchRow> = timed
             .iter()
             .skip(1)
-            .map(|(mode, t, rays)| crate::bench::BenchRow {
+            .map(|(mode, t, rays)| crate::stages::BenchRow {
                 what: format!(
                     "bake {id}: {} vs Surface ({} texels, {} samples)",
                     mode.name(),
@@ -476,7 +476,7 @@ impl BakeLightmaps {
         };
         let r = report::ladder(id, &scene, &bvh, table.as_ref(), self, &atlas, &ladder_opts, &say).map_err(fail)?;
         if let Some(row) = r.rows.iter().find(|x| x.method == "full") {
-            rows.push(crate::bench::BenchRow {
+            rows.push(crate::stages::BenchRow {
                 what: format!("bake {id}: volumetric path tracing vs Full at equal error ({} texels)", r.texels),
                 baseline_ms: row.reference_ms_at_equal_error.unwrap_or(f64::NAN),
                 candidate_ms: row.ms,

@@ -17,9 +17,9 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::bench::BenchRow;
 use crate::render::gbuffer::GBuffer;
 use crate::scene::Scene;
+use crate::stages::BenchRow;
 use crate::stages::god_rays::{
     self as epipolar, EpiLight, EpiMedium, EpipolarOptions, EpipolarOutput, EpipolarStats, ShadowMap,
 };

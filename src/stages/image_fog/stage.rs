@@ -23,12 +23,12 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::bench::BenchRow;
 use crate::render::Image;
 use crate::render::gbuffer::GBuffer;
 use crate::report::plot::{Plot, Scale, Series, write_png};
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
+use crate::stages::BenchRow;
 use crate::stages::image_fog::{self, FogMedium, FogOptions, LevelRule};
 use crate::stages::view::{self, View, ViewFields, ms};
 use crate::stages::{StageContext, StageError, StageOutcome};

@@ -1221,7 +1221,7 @@ fn env_residuum_bench(
     id: &str,
     table: &PopPresetTable,
     medium: &crate::stages::pop::medium::VoxelMedium,
-) -> Result<(String, crate::bench::BenchRow), String> {
+) -> Result<(String, crate::stages::BenchRow), String> {
     use crate::stages::pop::grid::NoOccluder;
     let sky = environment::bundled_sky();
     let ords = environment::ordinates(&sky, table.def.ordinates as usize, OrdinateSet::Importance);
@@ -1269,7 +1269,7 @@ fn env_residuum_bench(
         out[1].3,
         out[1].0
     );
-    let row = crate::bench::BenchRow {
+    let row = crate::stages::BenchRow {
         what: format!("{id}: POP merged isotropic residuum vs every ordinate to convergence (environment)"),
         baseline_ms: out[0].0,
         candidate_ms: out[1].0,
@@ -1285,7 +1285,7 @@ impl PopRender {
     /// (Sec. 5.4, Fig. 8) on a thick, nearly conservative cube (`σ_s = 20 /m`, albedo 0.999, g = 0.95,
     /// the preset's grid): converged anisotropic propagation against the switch at Eq. 10's `m'`, with the
     /// relative RMS difference of their collided fluence.
-    pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<crate::bench::BenchRow>), StageError> {
+    pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<crate::stages::BenchRow>), StageError> {
         use crate::stages::pop::{grid::NoOccluder, medium::VoxelMedium};
         let fields = self.fields();
         let table = self.open_table(id, ctx)?;
@@ -1367,7 +1367,7 @@ impl PopRender {
             full_ms / switched_ms.max(1e-9),
             diff
         ));
-        let mut rows = vec![crate::bench::BenchRow {
+        let mut rows = vec![crate::stages::BenchRow {
             what: format!("{id}: POP isotropic residuum vs anisotropic propagation to convergence"),
             baseline_ms: full_ms,
             candidate_ms: switched_ms,
@@ -1386,7 +1386,11 @@ impl PopRender {
     /// `voltab bench --gpu`: the stage's frame with the propagation on the CPU and on `ctx.device`
     /// side by side (median of 3 each), the GPU time of every pass kind, and how far the GPU frame's
     /// scattered light is from the CPU's.
-    pub fn bench_gpu(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<crate::bench::BenchRow>), StageError> {
+    pub fn bench_gpu(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+    ) -> Result<(String, Vec<crate::stages::BenchRow>), StageError> {
         let fields = self.fields();
         let table = self.open_table(id, ctx)?;
         let v = fields.load(id, ctx, None)?;
@@ -1423,7 +1427,7 @@ impl PopRender {
                 text.push_str(&format!("  {:<24} {:>3} passes {:>9.3} ms\n", p.phase, p.passes, 1e3 * p.seconds));
             }
         }
-        let rows = vec![crate::bench::BenchRow {
+        let rows = vec![crate::stages::BenchRow {
             what: format!("{id}: POP iterations, CPU vs {}", ctx.device.name()),
             baseline_ms: cpu_ms,
             candidate_ms: gpu_ms,

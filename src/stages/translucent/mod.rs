@@ -18,7 +18,7 @@
 //! - [`object_light`] (beyond the paper): the caustic and glow the object throws on the opaque
 //!   surfaces around it, as photon maps from the light rays that leave it.
 //! - [`compare`]: MSE against the reference (normalisation stated there), error against run time.
-//! - [`mod@reference`]: an independent volumetric path tracer for dielectric-bounded homogeneous media,
+//! - [`crate::reference::translucent`]: an independent volumetric path tracer for dielectric-bounded homogeneous media,
 //!   split by the number of scattering events in the medium.
 //!
 //! **Lights.** A smooth refractive boundary makes every path from a point light to a pinhole camera

@@ -26,12 +26,12 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::bench::BenchRow;
 use crate::reference::translucent::{self as reference, ReferenceOptions};
 use crate::render::{Image, RgbImage, ViewCamera};
 use crate::report::plot::{Plot, Scale, Series, write_png};
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
+use crate::stages::BenchRow;
 use crate::stages::translucent::compare::{self, Comparison};
 use crate::stages::translucent::points::PointOptions;
 use crate::stages::translucent::render::{self, RenderOptions};
