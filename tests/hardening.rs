@@ -258,3 +258,25 @@ fn the_reference_example_pipeline_checks() {
     std::fs::copy(common::root().join("pipelines/studio-base.ron"), d.path().join("studio-base.ron")).expect("copy");
     check_text(d.path(), &md[start..end]).expect("the example in schemas/reference.md passes check");
 }
+
+/// Issue 37: a `.usda` with one deleted `>` in a relationship path loops forever inside openusd
+/// (`Path::parent`). The guarded child is stopped at the time limit and the error names the file.
+#[test]
+fn a_usd_layer_that_hangs_the_parser_is_stopped_and_named() {
+    let d = tempdir();
+    let src = std::fs::read_to_string(common::root().join("scenes/fog_room.usda")).expect("bundled scene");
+    let broken =
+        src.replacen("rel material:binding = </World/Looks/white>", "rel material:binding = </World/Looks/white", 1);
+    assert_ne!(broken, src, "the relationship to break is in the bundled scene");
+    let p = write(d.path(), "hang.usda", &broken);
+    let t = Instant::now();
+    let o = common::voltab()
+        .args(["scene", p.to_str().expect("utf-8")])
+        .env("VOLTAB_USD_TIME_LIMIT", "3")
+        .output()
+        .expect("spawn");
+    let out = text(&o);
+    assert!(!o.status.success(), "{out}");
+    assert!(out.contains("hang.usda") && out.contains("did not finish within 3s"), "{out}");
+    assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
+}
