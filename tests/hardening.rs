@@ -163,8 +163,8 @@ fn write_bytes(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
 #[test]
 fn inconsistent_stored_lobes_definitions_are_refused_on_open() {
     let d = tempdir();
-    let cases: [(&str, fn(&mut voltab::tables::ms_lobes::MsLobes)); 2] =
-        [("z_min", |m| (m.z_min, m.z_max) = (6.0, -2.0)), ("rho_max", |m| m.rho_max = 0.0)];
+    type Edit = fn(&mut voltab::tables::ms_lobes::MsLobes);
+    let cases: [(&str, Edit); 2] = [("z_min", |m| (m.z_min, m.z_max) = (6.0, -2.0)), ("rho_max", |m| m.rho_max = 0.0)];
     for (field, edit) in cases {
         let bytes = golden_with_definition("golden_lobes.vtab", |def| {
             if let TableDef::MsLobes(m) = def {
@@ -172,7 +172,7 @@ fn inconsistent_stored_lobes_definitions_are_refused_on_open() {
             }
         });
         let p = write_bytes(d.path(), "lobes.vtab", &bytes);
-        let e = voltab::tables::ms_lobes::MsLobesTable::open(&p, None).err().expect("refused");
+        let e = voltab::tables::ms_lobes::MsLobesTable::open(&p, None).expect_err("refused");
         let s = e.to_string();
         assert!(s.contains("lobes.vtab") && s.contains("stored definition is invalid") && s.contains(field), "{s}");
         let o = run(&["verify", p.to_str().expect("utf-8")]);
@@ -190,7 +190,7 @@ fn nan_g_in_a_stored_zh_definition_is_refused_on_open() {
         }
     });
     let p = write_bytes(d.path(), "zh.vtab", &bytes);
-    let e = voltab::tables::zh_response::ZhResponseTable::open(&p, None, None).err().expect("refused");
+    let e = voltab::tables::zh_response::ZhResponseTable::open(&p, None, None).expect_err("refused");
     let s = e.to_string();
     assert!(s.contains("zh.vtab") && s.contains("stored definition is invalid") && s.contains("NaN"), "{s}");
 }

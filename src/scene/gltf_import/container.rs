@@ -59,10 +59,10 @@ pub(super) fn load(path: &Path) -> Result<Loaded, SceneError> {
 /// files are read from `base` (refused when `base` is `None`, e.g. when fuzzing).
 pub(super) fn load_bytes(path: &Path, bytes: &[u8], base: Option<&Path>) -> Result<Loaded, SceneError> {
     let (json_bytes, bin, glb) = if bytes.starts_with(b"glTF") {
-        let chunks = split_glb(path, &bytes)?;
+        let chunks = split_glb(path, bytes)?;
         (chunks.json, chunks.bin, true)
     } else {
-        (bytes.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(&bytes), None, false)
+        (bytes.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(bytes), None, false)
     };
     let mut root: json::Root = serde_json::from_slice(json_bytes).map_err(|e| json_error(path, &e, glb))?;
     check_version(path, &root)?;
@@ -202,7 +202,7 @@ fn check_layout(path: &Path, root: &json::Root) -> Result<(), SceneError> {
         let Some(v) = root.buffer_views.get(view.value()) else { continue };
         let size = ct.0.size() as u64;
         let start = v.byte_offset.map_or(0, |o| o.0).saturating_add(a.byte_offset.map_or(0, |o| o.0));
-        if start % size != 0 {
+        if !start.is_multiple_of(size) {
             return Err(SceneError::at(
                 path,
                 format!("accessors[{i}]"),
@@ -215,7 +215,7 @@ fn check_layout(path: &Path, root: &json::Root) -> Result<(), SceneError> {
             ));
         }
         if let Some(stride) = v.byte_stride
-            && stride.0 as u64 % size != 0
+            && !(stride.0 as u64).is_multiple_of(size)
         {
             return Err(SceneError::at(
                 path,
