@@ -280,3 +280,16 @@ fn a_usd_layer_that_hangs_the_parser_is_stopped_and_named() {
     assert!(out.contains("hang.usda") && out.contains("did not finish within 3s"), "{out}");
     assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
 }
+
+/// Found by fuzzing (fuzz/artifacts/pipeline/crash-cb7b9cc8…): `id: Some"hg"` is accepted by RON, and
+/// the dangling-preset error of that table lost its file and location.
+#[test]
+fn ids_spelled_as_options_keep_their_location() {
+    let d = tempdir();
+    for id in ["Some\"hg\"", "Some(\"hg\")"] {
+        let body = format!("(tables: [\n  PhaseHg(id: {id}, preset: \"nope\"),\n])");
+        let e = check_text(d.path(), &body).expect_err("dangling preset");
+        let s = e.to_string();
+        assert!(s.contains("preset \"nope\", which is not defined") && s.contains("p.ron:2:"), "{id}: {s}");
+    }
+}

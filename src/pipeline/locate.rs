@@ -105,7 +105,16 @@ impl Masked {
     pub fn find_key_strings(&self, key: &str, value: &str, from: usize) -> Vec<usize> {
         let mut out = Vec::new();
         for p in self.literals(value, from) {
-            let before = trim_back(&self.masked[..p]);
+            let mut before = trim_back(&self.masked[..p]);
+            // RON also accepts the option spelled out: `id: Some("x")`, and even `id: Some"x"`.
+            if let Some(b) = before.strip_suffix(b"(") {
+                before = trim_back(b);
+            }
+            if let Some(b) = before.strip_suffix(b"Some")
+                && ident_boundary(b, b.len())
+            {
+                before = trim_back(b);
+            }
             if let Some(before) = before.strip_suffix(b":") {
                 let before = trim_back(before);
                 if before.ends_with(key.as_bytes()) && ident_boundary(before, before.len() - key.len()) {
@@ -333,6 +342,15 @@ mod tests {
         assert_eq!(m.line_col(e), (3, 11));
         let f = m.find_field("mu_bins", e).unwrap();
         assert_eq!(m.line_col(f), (3, 38));
+    }
+
+    /// Found by fuzzing (issue 37): `id: Some"x"` parses, and its errors lost their location.
+    #[test]
+    fn ids_written_as_explicit_options_are_found() {
+        let m = Masked::new("(tables: [A(id: Some(\"a\")), B(id: Some\"b\"), C(id: XSome\"c\")])");
+        assert_eq!(m.find_key_string("id", "a", 0).map(|o| m.line_col(o)), Some((1, 13)));
+        assert_eq!(m.find_key_string("id", "b", 0).map(|o| m.line_col(o)), Some((1, 31)));
+        assert_eq!(m.find_key_string("id", "c", 0), None);
     }
 
     #[test]
