@@ -8,7 +8,7 @@
 //! Parent: spawns `/bin/sh -c 'ulimit -v <KiB>; exec <voltab> __usd-import-child <path>'` (the
 //! shell sets the address-space limit, so no unsafe code is needed), reads the child's reply from
 //! its stdout on a thread, and kills the child (by its id) when the time limit passes.
-//! Child: imports on a thread with a 512 MiB stack and writes one bincode [`Reply`] to stdout.
+//! Child: imports on a thread with a 512 MiB stack and writes one bincode `Reply` to stdout.
 //!
 //! Limits: `VOLTAB_USD_TIME_LIMIT` (seconds, default 120), `VOLTAB_USD_MEMORY_LIMIT` (bytes, default
 //! 8 GiB of address space). `VOLTAB_USD_GUARD=0` imports in-process (as does any binary other than
