@@ -293,3 +293,18 @@ fn ids_spelled_as_options_keep_their_location() {
         assert!(s.contains("preset \"nope\", which is not defined") && s.contains("p.ron:2:"), "{id}: {s}");
     }
 }
+
+/// Found by fuzzing (fuzz/artifacts/usd/timeout-ccdad09f…): a mutated fog_room.usda on which openusd
+/// does not finish; the guarded child is stopped at the limit and the error names the file.
+#[test]
+fn a_fuzzed_usd_layer_that_hangs_openusd_is_contained() {
+    let p = common::root().join("tests/fixtures/hostile/usd-fuzz-timeout-ccdad09f.usda");
+    let o = common::voltab()
+        .args(["scene", p.to_str().expect("utf-8")])
+        .env("VOLTAB_USD_TIME_LIMIT", "3")
+        .output()
+        .expect("spawn");
+    let out = text(&o);
+    assert!(!o.status.success() && o.status.code().is_some(), "{out}");
+    assert!(out.contains("usd-fuzz-timeout-ccdad09f.usda") && out.contains("the USD reader (openusd)"), "{out}");
+}
