@@ -52,3 +52,10 @@ RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --quiet "${features[@]}"
 
 step "Python interchange checks"
 VOLTAB_BIN="$(pwd)/target/debug/voltab" .venv/bin/python -m pytest -q tests/python
+
+# Fuzz smoke run (issue 37): opt-in, since its instrumented release build of every dependency is
+# long on a shared machine. VOLTAB_FUZZ_SMOKE=60 runs each fuzz target for 60 s.
+if [ "${VOLTAB_FUZZ_SMOKE:-0}" != 0 ]; then
+  step "fuzz smoke run (${VOLTAB_FUZZ_SMOKE} s per target)"
+  fuzz/run.sh all "$VOLTAB_FUZZ_SMOKE"
+fi

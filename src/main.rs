@@ -374,6 +374,9 @@ fn eval_lobes(a: &EvalLobes) -> Result<()> {
 }
 
 fn main() -> ExitCode {
+    if let Some(code) = voltab::scene::usd_import::guarded_child_main() {
+        return code; // the hidden USD import child (scene::usd_import::guard)
+    }
     let cli = Cli::parse();
     match dispatch(cli.command) {
         Ok(code) => code,

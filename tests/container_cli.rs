@@ -185,6 +185,16 @@ fn a_well_formed_but_unusable_phase_hg_file_is_refused_without_panicking() {
     let values: Vec<ArrayValues> = (0..5).map(|_| ArrayValues::F64(vec![1.0])).collect();
     let p = d.path().join("bad.vtab");
     std::fs::write(&p, encode(&header, &values, &EncodeOptions::default()).unwrap().bytes).unwrap();
+    // Its stored definition is checked first (issue 37)…
+    let e = PhaseHgTable::open(&p, None).unwrap_err().to_string();
+    assert!(e.contains("bad.vtab") && e.contains("stored definition is not a readable PhaseHg definition"), "{e}");
+    // …and with a valid definition the arrays themselves are still checked.
+    let def = voltab::tables::phase_hg::PhaseHg {
+        g: voltab::tables::phase_hg::GValues::List(vec![0.5]),
+        ..Default::default()
+    };
+    let header = Header { definition_ron: voltab::tables::TableDef::PhaseHg(def).canonical_ron(), ..header };
+    std::fs::write(&p, encode(&header, &values, &EncodeOptions::default()).unwrap().bytes).unwrap();
     let e = PhaseHgTable::open(&p, None).unwrap_err().to_string();
     assert!(e.contains("unusable for lookups"), "{e}");
 }

@@ -12,6 +12,8 @@
 //! - an existing file counts as up to date only if its header carries the key *and* every chunk
 //!   verifies, so a corrupted output is rebuilt rather than trusted (no poisoned cache).
 
+pub mod bounded;
+
 use std::fs::{self, File};
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -105,6 +105,19 @@ fn to_usize(n: u64, what: &str) -> Result<usize, ContainerError> {
     usize::try_from(n).map_err(|_| ContainerError::InvalidHeader(format!("{what} does not fit in memory")))
 }
 
+/// Lays out a file from a header, a chunk index and a payload exactly as the writer does (preamble,
+/// checksummed meta block, payload, end marker) **without** checking any of them: for tests,
+/// fuzzing and tools that need well-framed but lying files (e.g. a zstd bomb with an honest
+/// header). Readers must refuse what [`encode`] would never write.
+pub fn assemble_unchecked(header: &Header, chunks: &[ChunkEntry], payload: &[u8]) -> Vec<u8> {
+    let meta = bincode::serde::encode_to_vec((header, chunks), bincode_config()).unwrap_or_default();
+    let mut out = encode_preamble(&meta);
+    out.extend_from_slice(&meta);
+    out.extend_from_slice(payload);
+    out.extend_from_slice(&END_MAGIC);
+    out
+}
+
 /// Encodes a table into the bytes of a `.vtab` file.
 ///
 /// Fails with a typed error if the options or header are invalid, if the

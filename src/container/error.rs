@@ -197,6 +197,22 @@ pub enum ContainerError {
         /// Length obtained (capped at `expected + 1`).
         found: u64,
     },
+    /// A chunk declares more decoded (or stored) bytes than the reader's limit allows; refused
+    /// before anything is read or allocated.
+    #[error(
+        "array `{array}`, slice {slice} declares {len} bytes, above this reader's limit of {limit} bytes \
+         per chunk; if the table is genuine, raise the limit with VOLTAB_MAX_CHUNK_BYTES"
+    )]
+    ChunkTooLarge {
+        /// Array name.
+        array: String,
+        /// Slice index.
+        slice: u64,
+        /// Declared length (the larger of raw and stored).
+        len: u64,
+        /// The limit in force.
+        limit: u64,
+    },
 }
 
 fn path_suffix(path: &Option<PathBuf>) -> String {

@@ -25,11 +25,11 @@ mod robustness;
 mod testutil;
 
 pub use diff::{ChunkDiff, DiffReport, diff};
-pub use encode::{ArrayStats, EncodeOptions, EncodeStats, Encoded, encode};
+pub use encode::{ArrayStats, EncodeOptions, EncodeStats, Encoded, assemble_unchecked, encode};
 pub use error::{ContainerError, Version};
 pub use format::{
     ArrayDesc, ArrayValues, Axis, ChunkEntry, END_MAGIC, ElementType, FORMAT_MAJOR, FORMAT_MINOR, Header, MAGIC,
     MAX_META_LEN, Quantization, Spacing, Transform,
 };
-pub use reader::{VerifyReport, VtabReader, read_header};
+pub use reader::{DEFAULT_MAX_CHUNK_BYTES, ReadLimits, VerifyReport, VtabReader, read_header};
 pub use validate::{validate_header, validate_index};

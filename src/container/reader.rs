@@ -22,6 +22,37 @@ use super::transform::{bytes_f32, bytes_f64, undelta, unshuffle};
 /// chunks grow as real data arrives, so a forged length cannot force a huge allocation.
 const MAX_RESERVE: u64 = 16 * 1024 * 1024;
 
+/// Default largest decoded (and stored) size of one chunk: 256 MiB. The biggest slice any table
+/// kind writes is far below it; a file declaring more is refused on open, before any of it is
+/// read, so a small zstd bomb with an honest header cannot make the reader allocate gigabytes.
+pub const DEFAULT_MAX_CHUNK_BYTES: u64 = 256 << 20;
+
+/// Resource limits of a [`VtabReader`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ReadLimits {
+    /// Largest raw or stored length of one chunk, in bytes. Reading a slice needs at most about
+    /// three times this much memory (decompressed bytes, undone transform, decoded values).
+    pub max_chunk_bytes: u64,
+}
+
+impl Default for ReadLimits {
+    fn default() -> Self {
+        Self { max_chunk_bytes: DEFAULT_MAX_CHUNK_BYTES }
+    }
+}
+
+impl ReadLimits {
+    /// The default limits, or `VOLTAB_MAX_CHUNK_BYTES` bytes per chunk when that variable holds a
+    /// positive whole number.
+    pub fn from_env() -> Self {
+        let env = std::env::var("VOLTAB_MAX_CHUNK_BYTES").ok().and_then(|v| v.trim().parse::<u64>().ok());
+        match env {
+            Some(n) if n > 0 => Self { max_chunk_bytes: n },
+            _ => Self::default(),
+        }
+    }
+}
+
 #[derive(Debug)]
 enum Source {
     File { file: File, path: PathBuf },
@@ -67,6 +98,20 @@ impl Source {
             }
         }
     }
+}
+
+/// Opens `path` for reading if it is a regular file. A FIFO or device has no length to check
+/// against the header: it is refused instead of blocking or being read forever.
+fn open_regular(path: &Path) -> Result<File, ContainerError> {
+    // Checked before opening too: opening a FIFO for reading blocks until a writer appears.
+    crate::cache::bounded::check_regular(path, u64::MAX).map_err(|e| ContainerError::io(Some(path), e))?;
+    let file = File::open(path).map_err(|e| ContainerError::io(Some(path), e))?;
+    let meta = file.metadata().map_err(|e| ContainerError::io(Some(path), e))?;
+    if !meta.is_file() {
+        let e = std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file");
+        return Err(ContainerError::io(Some(path), e));
+    }
+    Ok(file)
 }
 
 /// Parsed front matter: header, index, version and where the payload lies.
@@ -129,7 +174,7 @@ pub struct VtabReader {
 
 /// Reads only the preamble and header of a `.vtab` file (no length or payload checks).
 pub fn read_header(path: &Path) -> Result<(Header, (u16, u16)), ContainerError> {
-    let file = File::open(path).map_err(|e| ContainerError::io(Some(path), e))?;
+    let file = open_regular(path)?;
     let mut source = Source::File { file, path: path.to_path_buf() };
     let total = source.total_len()?;
     let front = read_front(&mut source, total)?;
@@ -137,18 +182,29 @@ pub fn read_header(path: &Path) -> Result<(Header, (u16, u16)), ContainerError> 
 }
 
 impl VtabReader {
-    /// Opens a file, reading only its preamble, header and end marker.
+    /// Opens a file, reading only its preamble, header and end marker, with
+    /// [`ReadLimits::from_env`].
     pub fn open(path: &Path) -> Result<Self, ContainerError> {
-        let file = File::open(path).map_err(|e| ContainerError::io(Some(path), e))?;
-        Self::init(Source::File { file, path: path.to_path_buf() })
+        Self::open_with_limits(path, ReadLimits::from_env())
     }
 
-    /// Reads a `.vtab` file held in memory.
+    /// [`Self::open`] with explicit limits.
+    pub fn open_with_limits(path: &Path, limits: ReadLimits) -> Result<Self, ContainerError> {
+        let file = open_regular(path)?;
+        Self::init(Source::File { file, path: path.to_path_buf() }, limits)
+    }
+
+    /// Reads a `.vtab` file held in memory, with [`ReadLimits::from_env`].
     pub fn from_bytes(bytes: Vec<u8>) -> Result<Self, ContainerError> {
-        Self::init(Source::Bytes(bytes))
+        Self::from_bytes_with_limits(bytes, ReadLimits::from_env())
     }
 
-    fn init(mut source: Source) -> Result<Self, ContainerError> {
+    /// [`Self::from_bytes`] with explicit limits.
+    pub fn from_bytes_with_limits(bytes: Vec<u8>, limits: ReadLimits) -> Result<Self, ContainerError> {
+        Self::init(Source::Bytes(bytes), limits)
+    }
+
+    fn init(mut source: Source, limits: ReadLimits) -> Result<Self, ContainerError> {
         let total = source.total_len()?;
         let front = read_front(&mut source, total)?;
         let expected = front
@@ -161,6 +217,16 @@ impl VtabReader {
         }
         if total > expected {
             return Err(ContainerError::TrailingBytes { extra: total - expected });
+        }
+        // validate_index proved the entries are array-major and match the header's arrays.
+        if let Some(c) = front.chunks.iter().find(|c| c.raw_len.max(c.stored_len) > limits.max_chunk_bytes) {
+            let array = front.header.arrays.get(c.array as usize).map_or_else(String::new, |d| d.name.clone());
+            return Err(ContainerError::ChunkTooLarge {
+                array,
+                slice: c.slice,
+                len: c.raw_len.max(c.stored_len),
+                limit: limits.max_chunk_bytes,
+            });
         }
         let mut first_chunk = Vec::with_capacity(front.header.arrays.len());
         let mut next = 0usize;
@@ -257,7 +323,11 @@ impl VtabReader {
             ElementType::F32 => ArrayValues::F32(bytes_f32(&raw)),
             ElementType::F64 => ArrayValues::F64(bytes_f64(&raw)),
         };
-        let bad = values.to_f64().into_iter().enumerate().find(|(_, v)| !v.is_finite());
+        // Checked in place: a copy to f64 would double the memory of a large f32 chunk.
+        let bad = match &values {
+            ArrayValues::F32(v) => v.iter().position(|x| !x.is_finite()).map(|i| (i, f64::from(v[i]))),
+            ArrayValues::F64(v) => v.iter().position(|x| !x.is_finite()).map(|i| (i, v[i])),
+        };
         if let Some((i, value)) = bad {
             let base = slice.saturating_mul(desc.slice_len().unwrap_or(0));
             return Err(ContainerError::NonFinite { array: name(), index: base.saturating_add(i as u64), value });

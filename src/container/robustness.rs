@@ -201,3 +201,91 @@ fn frozen_v1_0_fixture_still_decodes() {
     assert_eq!(r.read_array(1).expect("steps"), ArrayValues::F32(steps));
     assert_eq!(r.read_array(2).expect("scalar"), ArrayValues::F64(vec![0.5, -2.0, 1e300]));
 }
+
+/// A file with one f32 array of `raw_len / 4` zeros in a single Shuffle chunk: an honest header
+/// whose payload is a few kilobytes of run-length zstd (compressed in 1 MiB blocks, so building it
+/// never holds the raw bytes).
+fn zero_bomb(raw_len: u64) -> Vec<u8> {
+    use std::io::Write;
+    let h = header(vec![desc(
+        "z",
+        ElementType::F32,
+        vec![Axis::linear("s", "", 0.0, 1.0, 1), Axis::linear("i", "", 0.0, 1.0, raw_len / 4)],
+    )]);
+    let mut enc = zstd::stream::write::Encoder::new(Vec::new(), 3).expect("encoder");
+    let block = vec![0u8; 1 << 20];
+    let mut left = raw_len;
+    while left > 0 {
+        let n = left.min(block.len() as u64) as usize;
+        enc.write_all(&block[..n]).expect("compress");
+        left -= n as u64;
+    }
+    let stored = enc.finish().expect("finish");
+    let entry = ChunkEntry {
+        array: 0,
+        slice: 0,
+        offset: 0,
+        stored_len: stored.len() as u64,
+        raw_len,
+        transform: Transform::Shuffle,
+        crc32: crc32fast::hash(&stored),
+    };
+    assemble(&h, &[entry], &stored)
+}
+
+/// Issue 37: a 33 KB file declaring one 1 GiB chunk made `verify` allocate 2 GiB and abort. The
+/// declared size is now checked against the reader's limit on open, before anything is read.
+#[test]
+fn a_zstd_bomb_with_an_honest_header_is_refused_on_open() {
+    let bomb = zero_bomb(1 << 30);
+    assert!(bomb.len() < 64 * 1024, "{} bytes", bomb.len());
+    let t = std::time::Instant::now();
+    let e = VtabReader::from_bytes(bomb).expect_err("1 GiB chunk over the default limit");
+    assert!(t.elapsed().as_secs() < 2, "{:?}", t.elapsed());
+    assert!(
+        matches!(&e, ContainerError::ChunkTooLarge { array, slice: 0, len, limit }
+            if array == "z" && *len == 1 << 30 && *limit == super::reader::DEFAULT_MAX_CHUNK_BYTES),
+        "{e:?}"
+    );
+    let msg = e.to_string();
+    assert!(
+        msg.contains("array `z`, slice 0 declares 1073741824 bytes") && msg.contains("VOLTAB_MAX_CHUNK_BYTES"),
+        "{msg}"
+    );
+}
+
+/// The limit is what refuses the file: the same kind of chunk under a raised limit decodes.
+#[test]
+fn the_chunk_limit_is_configurable_and_exact() {
+    use super::reader::ReadLimits;
+    let bomb = zero_bomb(4 << 20);
+    let small = ReadLimits { max_chunk_bytes: (4 << 20) - 1 };
+    let e = VtabReader::from_bytes_with_limits(bomb.clone(), small).expect_err("one byte over");
+    assert!(matches!(e, ContainerError::ChunkTooLarge { len, .. } if len == 4 << 20), "{e:?}");
+    let exact = ReadLimits { max_chunk_bytes: 4 << 20 };
+    let rep = VtabReader::from_bytes_with_limits(bomb, exact).and_then(|mut r| r.verify()).expect("at the limit");
+    assert_eq!(rep.raw_bytes, 4 << 20);
+}
+
+/// A header naming 40,000 arrays: the duplicate-name check was quadratic (5.7 s); it is a set now.
+#[test]
+fn many_arrays_are_validated_in_linear_time() {
+    let lin = || Axis::linear("x", "", 0.0, 1.0, 1);
+    let mut arrays: Vec<_> = (0..40_000).map(|i| desc(&format!("a{i}"), ElementType::F32, vec![lin()])).collect();
+    let t = std::time::Instant::now();
+    super::validate::validate_header(&header(arrays.clone())).expect("unique names");
+    arrays.push(desc("a17", ElementType::F32, vec![lin()]));
+    let e = super::validate::validate_header(&header(arrays)).expect_err("duplicate");
+    assert!(e.to_string().contains("duplicate array name `a17`"), "{e}");
+    assert!(t.elapsed().as_secs_f64() < 1.0, "{:?}", t.elapsed());
+}
+
+/// A FIFO, `/dev/zero` or `/dev/urandom` given as a table is refused without blocking or reading.
+#[test]
+fn devices_and_fifos_are_not_read_as_tables() {
+    for dev in ["/dev/zero", "/dev/urandom"] {
+        let e = VtabReader::open(std::path::Path::new(dev)).expect_err(dev);
+        let msg = e.to_string();
+        assert!(msg.contains(dev) && msg.contains("not a regular file"), "{msg}");
+    }
+}

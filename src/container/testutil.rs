@@ -4,9 +4,7 @@
 //! Invariant: fixtures are deterministic (no randomness, no clocks), so every
 //! test that uses them pins the same bytes on every run.
 
-use super::format::{
-    ArrayDesc, ArrayValues, Axis, ChunkEntry, END_MAGIC, ElementType, Header, bincode_config, encode_preamble,
-};
+use super::format::{ArrayDesc, ArrayValues, Axis, ChunkEntry, ElementType, Header};
 
 /// An array description without quantization.
 pub fn desc(name: &str, element: ElementType, axes: Vec<Axis>) -> ArrayDesc {
@@ -75,12 +73,7 @@ pub fn small_table() -> (Header, Vec<ArrayValues>) {
 /// Assembles a file from a header, an index and a payload, exactly as the
 /// writer lays it out (used to forge files with valid checksums).
 pub fn assemble(header: &Header, chunks: &[ChunkEntry], payload: &[u8]) -> Vec<u8> {
-    let meta = bincode::serde::encode_to_vec((header, chunks), bincode_config()).unwrap_or_default();
-    let mut out = encode_preamble(&meta);
-    out.extend_from_slice(&meta);
-    out.extend_from_slice(payload);
-    out.extend_from_slice(&END_MAGIC);
-    out
+    super::encode::assemble_unchecked(header, chunks, payload)
 }
 
 /// A unique scratch path in the system temp directory.

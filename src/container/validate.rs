@@ -81,8 +81,10 @@ pub fn validate_header(header: &Header) -> Result<(), ContainerError> {
     if u32::try_from(header.arrays.len()).is_err() {
         return Err(invalid("too many arrays".into()));
     }
-    for (i, desc) in header.arrays.iter().enumerate() {
-        if header.arrays.iter().take(i).any(|d| d.name == desc.name) {
+    // A set, not a scan of the earlier names: 40,000 arrays took 5.7 s quadratically (issue 37).
+    let mut names = std::collections::HashSet::with_capacity(header.arrays.len());
+    for desc in &header.arrays {
+        if !names.insert(desc.name.as_str()) {
             return Err(invalid(format!("duplicate array name `{}`", desc.name)));
         }
         validate_array(desc)?;

@@ -3,33 +3,44 @@
 //! searching the source for the entry and field they concern, with comments and string contents
 //! masked so a match inside a comment is never reported.
 
-/// Source text with comments blanked out (same byte offsets), for searching.
+/// Source text with comments and string contents blanked out (same byte offsets), for searching,
+/// plus every string literal's decoded value (escapes such as `"h\u{67}"` and raw strings
+/// `r#"…"#` resolved), so an entry is found by the value RON gave it, not by its spelling.
+///
+/// Every lookup is linear in the size of what it returns or scans (an entry, a line), never in the
+/// whole file: validating 8,000 tables must not search the file 8,000 times (issue 37).
 #[derive(Debug)]
 pub struct Masked {
     text: String,
     masked: Vec<u8>,
+    /// Byte offset of the start of each line.
+    line_starts: Vec<usize>,
+    /// Whether each line is pure ASCII (its column is then a byte difference).
+    line_ascii: Vec<bool>,
+    /// (start, end) byte range of every string literal (quotes included), in file order.
+    strings: Vec<(usize, usize)>,
+    /// Decoded value → indices into `strings`, in file order.
+    by_value: std::collections::HashMap<String, Vec<usize>>,
 }
 
 impl Masked {
-    /// Masks `//` and `/* */` comments (nested block comments as RON allows).
+    /// Masks `//` and `/* */` comments (nested block comments as RON allows) and string contents.
     pub fn new(text: &str) -> Self {
         let b = text.as_bytes();
         let mut m = b.to_vec();
+        let mut strings = Vec::new();
+        let mut by_value: std::collections::HashMap<String, Vec<usize>> = std::collections::HashMap::new();
         let mut i = 0;
-        let mut in_str = false;
         while i < b.len() {
-            if in_str {
-                if b[i] == b'\\' {
-                    i += 2;
-                    continue;
+            if let Some((end, value)) = string_literal(b, i) {
+                for c in &mut m[i + 1..end.saturating_sub(1).max(i + 1)] {
+                    if *c != b'\n' {
+                        *c = b' ';
+                    }
                 }
-                if b[i] == b'"' {
-                    in_str = false;
-                }
-                i += 1;
-            } else if b[i] == b'"' {
-                in_str = true;
-                i += 1;
+                by_value.entry(value).or_default().push(strings.len());
+                strings.push((i, end));
+                i = end;
             } else if b[i] == b'/' && b.get(i + 1) == Some(&b'/') {
                 while i < b.len() && b[i] != b'\n' {
                     m[i] = b' ';
@@ -62,15 +73,27 @@ impl Masked {
                 i += 1;
             }
         }
-        Self { text: text.to_owned(), masked: m }
+        let mut line_starts = vec![0];
+        line_starts.extend(b.iter().enumerate().filter(|(_, c)| **c == b'\n').map(|(i, _)| i + 1));
+        let line_ascii = line_starts
+            .iter()
+            .enumerate()
+            .map(|(k, &s)| b[s..line_starts.get(k + 1).copied().unwrap_or(b.len())].is_ascii())
+            .collect();
+        Self { text: text.to_owned(), masked: m, line_starts, line_ascii, strings, by_value }
     }
 
     /// 1-based (line, column) of a byte offset.
     pub fn line_col(&self, offset: usize) -> (usize, usize) {
-        let upto = &self.text[..offset.min(self.text.len())];
-        let line = upto.matches('\n').count() + 1;
-        let col = upto.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-        (line, col)
+        let offset = offset.min(self.text.len());
+        let line = self.line_starts.partition_point(|&s| s <= offset).max(1);
+        let start = self.line_starts[line - 1];
+        let col = if self.line_ascii[line - 1] {
+            offset - start
+        } else {
+            self.text.get(start..offset).map_or(offset - start, |l| l.chars().count())
+        };
+        (line, col + 1)
     }
 
     /// Offset of `key` followed by optional white space and `:` and then `"value"`, i.e. `id: "x"`.
@@ -80,45 +103,49 @@ impl Masked {
 
     /// Offsets of every `key: "value"` at or after `from`, in order.
     pub fn find_key_strings(&self, key: &str, value: &str, from: usize) -> Vec<usize> {
-        let needle = format!("\"{value}\"");
         let mut out = Vec::new();
-        let mut start = from;
-        while let Some(p) = find(&self.masked, needle.as_bytes(), start) {
-            let before = trim_back(&self.masked[..p]);
+        for p in self.literals(value, from) {
+            let mut before = trim_back(&self.masked[..p]);
+            // RON also accepts the option spelled out: `id: Some("x")`, and even `id: Some"x"`.
+            if let Some(b) = before.strip_suffix(b"(") {
+                before = trim_back(b);
+            }
+            if let Some(b) = before.strip_suffix(b"Some")
+                && ident_boundary(b, b.len())
+            {
+                before = trim_back(b);
+            }
             if let Some(before) = before.strip_suffix(b":") {
                 let before = trim_back(before);
                 if before.ends_with(key.as_bytes()) && ident_boundary(before, before.len() - key.len()) {
                     out.push(before.len() - key.len());
                 }
             }
-            start = p + 1;
         }
         out
     }
 
     /// Offset of a map key `"name"` followed by `:` (preset and override names).
     pub fn find_map_key(&self, name: &str, from: usize) -> Option<usize> {
-        let needle = format!("\"{name}\"");
-        let mut start = from;
-        while let Some(p) = find(&self.masked, needle.as_bytes(), start) {
-            let after = &self.masked[p + needle.len()..];
+        self.literals(name, from).find(|&p| {
+            let end = self.literal_end(p);
+            let after = &self.masked[end..];
             let rest = after.iter().position(|c| !c.is_ascii_whitespace());
-            if rest.is_some_and(|r| after[r] == b':') {
-                return Some(p);
-            }
-            start = p + 1;
-        }
-        None
+            rest.is_some_and(|r| after[r] == b':')
+        })
     }
 
-    /// Offset of field `name:` at or after `from` (the first one, which lies inside the entry that
-    /// starts at `from` as long as that entry sets the field).
+    /// Offset of field `name:` at or after `from`, inside the entry that contains `from` (the
+    /// search stops at the parenthesis that closes it, so a field the entry does not set is never
+    /// reported at another entry's).
     pub fn find_field(&self, name: &str, from: usize) -> Option<usize> {
+        let end = self.entry_end(from);
+        let hay = self.masked.get(..end)?;
         let mut start = from;
-        while let Some(p) = find(&self.masked, name.as_bytes(), start) {
-            let after = &self.masked[p + name.len()..];
+        while let Some(p) = find(hay, name.as_bytes(), start) {
+            let after = &hay[p + name.len()..];
             let colon = after.iter().position(|c| !c.is_ascii_whitespace()).is_some_and(|r| after[r] == b':');
-            if colon && ident_boundary(&self.masked, p) && !is_ident(after.first().copied()) {
+            if colon && ident_boundary(hay, p) && !is_ident(after.first().copied()) {
                 return Some(p);
             }
             start = p + 1;
@@ -126,9 +153,160 @@ impl Masked {
         None
     }
 
-    /// Offset of the first occurrence of a plain string literal `"s"`.
+    /// Offset of the first string literal at or after `from` whose value is `s`.
     pub fn find_string(&self, s: &str, from: usize) -> Option<usize> {
-        find(&self.masked, format!("\"{s}\"").as_bytes(), from)
+        self.literals(s, from).next()
+    }
+
+    /// Offset of the `index`-th (0-based) entry of the list given as field `list` (e.g. the third
+    /// table of `tables: [...]`), for entries that have no id to be found by.
+    pub fn find_list_entry(&self, list: &str, index: usize) -> Option<usize> {
+        let field = self.find_field(list, 0)?;
+        let open = field + self.masked[field..].iter().position(|&c| c == b'[')?;
+        let mut depth = 0usize;
+        let mut seen = 0usize;
+        let mut expect_entry = true;
+        let mut i = open + 1;
+        while i < self.masked.len() {
+            let c = self.masked[i];
+            if depth == 0 && expect_entry && !c.is_ascii_whitespace() && c != b']' && c != b',' {
+                if seen == index {
+                    return Some(i);
+                }
+                seen += 1;
+                expect_entry = false;
+            }
+            match c {
+                b'"' => {
+                    i = self.literal_end(i);
+                    continue;
+                }
+                b'(' | b'[' | b'{' => depth += 1,
+                b')' | b']' | b'}' if depth == 0 => return None,
+                b')' | b']' | b'}' => depth -= 1,
+                b',' if depth == 0 => expect_entry = true,
+                _ => {}
+            }
+            i += 1;
+        }
+        None
+    }
+
+    /// End (exclusive) of the innermost bracketed entry containing `from`: the offset of the
+    /// bracket that closes it, or the end of the text.
+    fn entry_end(&self, from: usize) -> usize {
+        let mut depth = 0usize;
+        let mut i = from;
+        while i < self.masked.len() {
+            match self.masked[i] {
+                b'"' => {
+                    i = self.literal_end(i);
+                    continue;
+                }
+                b'(' | b'[' | b'{' => depth += 1,
+                b')' | b']' | b'}' if depth == 0 => return i,
+                b')' | b']' | b'}' => depth -= 1,
+                _ => {}
+            }
+            i += 1;
+        }
+        self.masked.len()
+    }
+
+    /// Start offsets of the literals with value `value` at or after `from`.
+    fn literals(&self, value: &str, from: usize) -> impl Iterator<Item = usize> + '_ {
+        self.by_value.get(value).into_iter().flatten().map(|&k| self.strings[k].0).filter(move |&p| p >= from)
+    }
+
+    /// End (exclusive) of the literal whose opening quote (or `r` of a raw string) is at `start`;
+    /// `start + 1` if no literal starts there.
+    fn literal_end(&self, start: usize) -> usize {
+        let k = self.strings.partition_point(|&(s, _)| s < start);
+        match self.strings.get(k) {
+            Some(&(s, e)) if s == start => e,
+            // The quote of a raw string sits after its `r#…`: find the literal containing it.
+            _ => match k.checked_sub(1).and_then(|k| self.strings.get(k)) {
+                Some(&(s, e)) if s < start && start < e => e,
+                _ => start + 1,
+            },
+        }
+    }
+}
+
+/// The string literal starting at `i` (a `"…"` with escapes, or a raw `r"…"` / `r#"…"#`):
+/// its end (exclusive) and decoded value. An unterminated literal runs to the end of the text.
+fn string_literal(b: &[u8], i: usize) -> Option<(usize, String)> {
+    if b[i] == b'r' && (i == 0 || !is_ident(Some(b[i - 1]))) {
+        let hashes = b[i + 1..].iter().take_while(|&&c| c == b'#').count();
+        if b.get(i + 1 + hashes) != Some(&b'"') {
+            return None;
+        }
+        let body = i + 2 + hashes;
+        let mut j = body;
+        while j < b.len() {
+            if b[j] == b'"' && b[j + 1..].iter().take(hashes).filter(|&&c| c == b'#').count() == hashes {
+                let value = String::from_utf8_lossy(&b[body..j]).into_owned();
+                return Some(((j + 1 + hashes).min(b.len()), value));
+            }
+            j += 1;
+        }
+        return Some((b.len(), String::from_utf8_lossy(&b[body..]).into_owned()));
+    }
+    if b[i] != b'"' {
+        return None;
+    }
+    let mut out = Vec::new();
+    let mut j = i + 1;
+    while j < b.len() {
+        match b[j] {
+            b'"' => return Some((j + 1, String::from_utf8_lossy(&out).into_owned())),
+            b'\\' => {
+                let (len, decoded) = unescape(&b[j + 1..]);
+                out.extend_from_slice(decoded.as_bytes());
+                j += 1 + len;
+            }
+            c => {
+                out.push(c);
+                j += 1;
+            }
+        }
+    }
+    Some((b.len(), String::from_utf8_lossy(&out).into_owned()))
+}
+
+/// One escape after a backslash: (bytes consumed, decoded text). Unknown escapes decode to
+/// themselves (RON rejects them before any lookup happens).
+fn unescape(b: &[u8]) -> (usize, String) {
+    let simple = |c: char| (1, c.to_string());
+    match b.first() {
+        Some(b'n') => simple('\n'),
+        Some(b't') => simple('\t'),
+        Some(b'r') => simple('\r'),
+        Some(b'0') => simple('\0'),
+        Some(b'u') if b.get(1) == Some(&b'{') => {
+            let close = b.iter().take(12).position(|&c| c == b'}');
+            let ch = close.and_then(|c| {
+                let hex = std::str::from_utf8(&b[2..c]).ok()?;
+                char::from_u32(u32::from_str_radix(hex, 16).ok()?)
+            });
+            match (close, ch) {
+                (Some(c), Some(ch)) => (c + 1, ch.to_string()),
+                _ => (1, "u".into()),
+            }
+        }
+        Some(b'u') if b.len() >= 5 => {
+            let ch = std::str::from_utf8(&b[1..5])
+                .ok()
+                .and_then(|h| u32::from_str_radix(h, 16).ok())
+                .and_then(char::from_u32);
+            ch.map_or((1, "u".into()), |ch| (5, ch.to_string()))
+        }
+        Some(b'x') if b.len() >= 3 => {
+            let ch = std::str::from_utf8(&b[1..3]).ok().and_then(|h| u8::from_str_radix(h, 16).ok());
+            ch.map_or((1, "x".into()), |c| (3, char::from(c).to_string()))
+        }
+        Some(&c) if c.is_ascii() => simple(char::from(c)),
+        Some(_) | None => (0, String::new()),
     }
 }
 
@@ -164,6 +342,15 @@ mod tests {
         assert_eq!(m.line_col(e), (3, 11));
         let f = m.find_field("mu_bins", e).unwrap();
         assert_eq!(m.line_col(f), (3, 38));
+    }
+
+    /// Found by fuzzing (issue 37): `id: Some"x"` parses, and its errors lost their location.
+    #[test]
+    fn ids_written_as_explicit_options_are_found() {
+        let m = Masked::new("(tables: [A(id: Some(\"a\")), B(id: Some\"b\"), C(id: XSome\"c\")])");
+        assert_eq!(m.find_key_string("id", "a", 0).map(|o| m.line_col(o)), Some((1, 13)));
+        assert_eq!(m.find_key_string("id", "b", 0).map(|o| m.line_col(o)), Some((1, 31)));
+        assert_eq!(m.find_key_string("id", "c", 0), None);
     }
 
     #[test]

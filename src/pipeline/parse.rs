@@ -63,10 +63,40 @@ pub trait Sources {
 pub struct Disk;
 
 impl Sources for Disk {
+    /// Reads a regular file of at most [`crate::cache::bounded::max_input_bytes`] bytes: a FIFO or
+    /// device (`include: ["/dev/zero"]`) is refused rather than read forever. Text that is not UTF-8
+    /// fails with a [`NotUtf8`] payload locating the first bad byte.
     fn read(&self, path: &Path) -> std::io::Result<String> {
-        std::fs::read_to_string(path)
+        let bytes = crate::cache::bounded::read_regular(path, crate::cache::bounded::max_input_bytes())?;
+        String::from_utf8(bytes).map_err(|e| {
+            let valid = e.utf8_error().valid_up_to();
+            let text = std::str::from_utf8(&e.as_bytes()[..valid]).unwrap_or("");
+            let line = text.matches('\n').count() + 1;
+            let col = text.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            std::io::Error::new(std::io::ErrorKind::InvalidData, NotUtf8 { line, col, byte: valid })
+        })
     }
 }
+
+/// The payload of the I/O error [`Disk`] returns for text that is not UTF-8: where the first
+/// invalid byte is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NotUtf8 {
+    /// 1-based line of the first invalid byte.
+    pub line: usize,
+    /// 1-based column (in characters) of the first invalid byte.
+    pub col: usize,
+    /// Byte offset of the first invalid byte.
+    pub byte: usize,
+}
+
+impl std::fmt::Display for NotUtf8 {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "the text is not valid UTF-8 (first invalid byte at offset {})", self.byte)
+    }
+}
+
+impl std::error::Error for NotUtf8 {}
 
 /// The pipelines compiled into the binary (used when `voltab` runs without arguments outside a
 /// checkout, so the README's main command works from anywhere).
@@ -89,8 +119,14 @@ impl Sources for Embedded {
     }
 }
 
-/// Lexically normalises `a/./b/../c` to `a/c` (no file system access).
+/// Lexically normalises `a/./b/../c` to `a/c` (no file system access); a path that normalises
+/// to nothing (`.`, `a/..`) becomes `.`, so messages never show an empty path.
 pub fn normalize(p: &Path) -> PathBuf {
+    let out = normalize_components(p);
+    if out.as_os_str().is_empty() { PathBuf::from(".") } else { out }
+}
+
+fn normalize_components(p: &Path) -> PathBuf {
     let mut out = PathBuf::new();
     for c in p.components() {
         match c {
@@ -153,13 +189,7 @@ fn load_into(
     if out.files.iter().any(|f| f.path == path) {
         return Ok(()); // already loaded through another include (diamond): load once
     }
-    let text = sources.read(path).map_err(|e| {
-        let what = if included_from.is_some() { "included pipeline" } else { "pipeline" };
-        PipelineError::one(
-            Diagnostic::new(K::Io, included_from.clone(), format!("cannot read {what} {}: {e}", path.display()))
-                .with_help("check the path (includes are relative to the including file) and its permissions"),
-        )
-    })?;
+    let text = sources.read(path).map_err(|e| PipelineError::one(read_diagnostic(path, included_from.clone(), &e)))?;
     let file: PipelineFile =
         ron_options().from_str(&text).map_err(|e| PipelineError::one(ron_diagnostic(path, &text, &e)))?;
     let masked = Masked::new(&text);
@@ -178,6 +208,24 @@ fn load_into(
     out.overrides.extend(file.overrides.into_iter().map(|(n, d)| (n, d, idx)));
     out.stages.extend(file.stages.into_iter().map(|d| (d, idx)));
     Ok(())
+}
+
+/// Why a pipeline file could not be read, located at the bad byte for non-UTF-8 text and at the
+/// `include` entry otherwise, with a hint that fits the cause (not always "permissions").
+fn read_diagnostic(path: &Path, included_from: Option<Loc>, e: &std::io::Error) -> Diagnostic {
+    let what = if included_from.is_some() { "included pipeline" } else { "pipeline" };
+    if let Some(bad) = e.get_ref().and_then(|r| r.downcast_ref::<NotUtf8>()) {
+        let loc = Loc { file: path.to_path_buf(), line: bad.line, col: bad.col };
+        return Diagnostic::new(K::Io, Some(loc), format!("cannot read {what} {}: {bad}", path.display()))
+            .with_help("pipeline files are UTF-8 text; re-save the file as UTF-8");
+    }
+    let help = match e.kind() {
+        std::io::ErrorKind::NotFound => "check the path (includes are relative to the including file)",
+        std::io::ErrorKind::PermissionDenied => "check the file's permissions",
+        std::io::ErrorKind::InvalidInput => "name a regular pipeline file (.ron) no larger than the limit",
+        _ => "check the path (includes are relative to the including file) and its permissions",
+    };
+    Diagnostic::new(K::Io, included_from, format!("cannot read {what} {}: {e}", path.display())).with_help(help)
 }
 
 /// Turns a RON error into a diagnostic with a location and a hint.

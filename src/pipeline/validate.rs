@@ -5,7 +5,7 @@
 //! no cycles, same kind); every field in range (per kind); stage references name tables of the
 //! right kind; every table fits in memory. All problems are collected and reported together.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use super::error::{Diagnostic, DiagnosticKind as K, Loc, PipelineError, suggestion_help};
@@ -193,13 +193,18 @@ pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipe
     // Tables: ids present, well-formed, unique.
     let mut tables: Vec<(String, TableDecl, usize)> = Vec::new();
     let mut seen: BTreeMap<String, usize> = BTreeMap::new();
-    for (i, (decl, file)) in l.tables.iter().enumerate() {
+    // Position of each entry within its own file's `tables: [...]`, to locate entries without an id.
+    let mut per_file = vec![0usize; l.files.len()];
+    for (decl, file) in &l.tables {
+        let nth = per_file[*file];
+        per_file[*file] += 1;
         let Some(id) = decl.id() else {
+            let f = &l.files[*file];
             diags.push(
                 Diagnostic::new(
                     K::MissingField,
-                    None,
-                    format!("table #{} ({}) in {} has no id", i + 1, decl.kind(), l.files[*file].path.display()),
+                    f.masked.find_list_entry("tables", nth).map(|o| f.loc(o)),
+                    format!("table #{} ({}) in {} has no id", nth + 1, decl.kind(), f.path.display()),
                 )
                 .with_help("add id: \"a_name\" to the entry"),
             );
@@ -238,11 +243,12 @@ pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipe
         tables.push((id.to_owned(), decl.clone(), *file));
     }
 
-    // Overrides: apply to included tables.
+    // Overrides: apply to included tables (found through a map: linear in the number of entries).
+    let table_index: HashMap<String, usize> = tables.iter().enumerate().map(|(k, t)| (t.0.clone(), k)).collect();
     for (id, over, file) in &l.overrides {
         let f = &l.files[*file];
         let loc = f.masked.find_map_key(id, 0).map(|o| f.loc(o));
-        let Some(t) = tables.iter_mut().find(|t| &t.0 == id) else {
+        let Some(t) = table_index.get(id).map(|&k| &mut tables[k]) else {
             let ids: Vec<&str> = seen.keys().map(String::as_str).collect();
             diags.push(
                 Diagnostic::new(
@@ -358,12 +364,17 @@ pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipe
     // Stages.
     let mut stage_ids = BTreeSet::new();
     let mut stages = Vec::new();
+    let validated: HashMap<&str, &ValidatedTable> = out.iter().map(|t| (t.id.as_str(), t)).collect();
+    let mut per_file = vec![0usize; l.files.len()];
     for (decl, file) in &l.stages {
+        let nth = per_file[*file];
+        per_file[*file] += 1;
         let Some(id) = decl.id() else {
+            let f = &l.files[*file];
             diags.push(
                 Diagnostic::new(
                     K::MissingField,
-                    None,
+                    f.masked.find_list_entry("stages", nth).map(|o| f.loc(o)),
                     format!("a {} stage in {} has no id", decl.kind(), l.files[*file].path.display()),
                 )
                 .with_help("add id: \"a_name\""),
@@ -382,7 +393,7 @@ pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipe
         let mut bad = false;
         for (field, table_id, kind) in def.table_refs() {
             let floc = field_loc(*file, id, field).or_else(|| loc.clone());
-            match out.iter().find(|t| t.id == table_id) {
+            match validated.get(table_id.as_str()).copied() {
                 None if table_id.is_empty() => {
                     diags.push(
                         Diagnostic::new(K::MissingField, floc, format!("stage \"{id}\" needs `{field}`"))
@@ -413,6 +424,10 @@ pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipe
                 Some(_) => {}
             }
         }
+        if let Some(d) = plot_g_not_in_table(&def, &validated, id) {
+            diags.push(Diagnostic { loc: field_loc(*file, id, "g").or_else(|| loc.clone()), ..d });
+            bad = true;
+        }
         for i in def.validate() {
             diags.push(
                 Diagnostic::new(
@@ -434,6 +449,24 @@ pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipe
     } else {
         Err(PipelineError { diagnostics: diags })
     }
+}
+
+/// A `PlotPhase` stage's `g` must name g values of its table (matched within 1e-9, as the table
+/// reader matches them): found at `check`, not only when `run` opens the table (issue 37).
+fn plot_g_not_in_table(def: &StageDef, tables: &HashMap<&str, &ValidatedTable>, id: &str) -> Option<Diagnostic> {
+    let StageDef::PlotPhase(p) = def else { return None };
+    let TableDef::PhaseHg(t) = tables.get(p.table.as_str())?.def() else { return None };
+    let have = t.g.values();
+    let missing = p.g.iter().find(|g| !have.iter().any(|x| (*x - **g).abs() <= 1e-9))?;
+    let list: Vec<String> = have.iter().take(32).map(|g| format!("{g}")).collect();
+    Some(
+        Diagnostic::new(
+            K::DanglingReference,
+            None,
+            format!("stage \"{id}\" plots g = {missing}, which table \"{}\" does not hold", p.table),
+        )
+        .with_help(format!("use g values of the table: {}", list.join(", "))),
+    )
 }
 
 fn set_preset(d: &mut TableDecl, p: Option<String>) {

@@ -357,11 +357,20 @@ pub enum TableReadError {
 /// the variant it expects). Errors go through the caller's `container` and `layout` constructors.
 pub fn open_kind<E>(
     path: &std::path::Path,
-    (kind, supported): (&str, u32),
+    expected: (&str, u32),
     container: impl Fn(crate::container::ContainerError) -> E,
     layout: impl Fn(String) -> E,
 ) -> Result<(crate::container::VtabReader, TableDef), E> {
     let r = crate::container::VtabReader::open(path).map_err(container)?;
+    check_kind(r, expected, layout)
+}
+
+/// [`open_kind`] on an already open reader (e.g. one made from bytes).
+pub fn check_kind<E>(
+    r: crate::container::VtabReader,
+    (kind, supported): (&str, u32),
+    layout: impl Fn(String) -> E,
+) -> Result<(crate::container::VtabReader, TableDef), E> {
     let h = r.header();
     if h.kind != kind {
         return Err(layout(format!("holds a {} table, not {kind}", h.kind)));
@@ -372,9 +381,31 @@ pub fn open_kind<E>(
             h.kind_schema_version
         )));
     }
-    let def = ron::from_str::<TableDef>(&h.definition_ron)
-        .map_err(|_| layout(format!("its stored definition is not a readable {kind} definition")))?;
+    let def = stored_definition(h, kind).map_err(layout)?;
     Ok((r, def))
+}
+
+/// Parses a table header's stored definition and validates it exactly as a pipeline's table is
+/// validated (same [`TableDef::validate`], same memory estimate): a file whose definition was
+/// edited (`z_min > z_max`, `g: [NaN]`, `rho_max: 0`, …) is refused with the first broken rule
+/// instead of reaching a reader that trusts it (issue 37).
+pub fn stored_definition(h: &crate::container::Header, kind: &str) -> Result<TableDef, String> {
+    let def = ron::from_str::<TableDef>(&h.definition_ron)
+        .map_err(|_| format!("its stored definition is not a readable {kind} definition"))?;
+    if def.kind() != kind {
+        return Err(format!("its stored definition is a {} definition, not {kind}", def.kind()));
+    }
+    if let Some(i) = def.validate().first() {
+        return Err(format!("its stored definition is invalid: {} (field `{}`; {})", i.message, i.field, i.help));
+    }
+    let limit = crate::pipeline::Limits::from_machine().memory_bytes;
+    if def.estimated_bytes() > limit {
+        return Err(format!(
+            "its stored definition would need {} bytes of memory, above this machine's limit of {limit}",
+            def.estimated_bytes()
+        ));
+    }
+    Ok(def)
 }
 
 /// Checks that a table's kind and layout version are ones this build can consume.
@@ -400,7 +431,7 @@ pub fn check_known_kind(h: &crate::container::Header) -> Result<(), String> {
             env!("CARGO_PKG_VERSION")
         ));
     }
-    Ok(())
+    stored_definition(h, &h.kind).map(|_| ())
 }
 
 /// Converts f64 values to the array's element type, refusing non-finite results.

@@ -41,22 +41,35 @@ pub(super) struct Loaded {
     pub buffers: Vec<Vec<u8>>,
 }
 
-/// Reads and validates `path`.
+/// Reads and validates `path` (a regular file of at most
+/// [`crate::cache::bounded::max_input_bytes`] bytes; its buffer files are resolved in its folder).
 pub(super) fn load(path: &Path) -> Result<Loaded, SceneError> {
-    let bytes = std::fs::read(path).map_err(|e| {
-        SceneError::file(path, format!("cannot read the file: {e}"), "check the path and its permissions")
+    let bytes = crate::cache::bounded::read_regular(path, crate::cache::bounded::max_input_bytes()).map_err(|e| {
+        let help = match e.kind() {
+            std::io::ErrorKind::InvalidInput => "name a regular .gltf or .glb file",
+            _ => "check the path and its permissions",
+        };
+        SceneError::file(path, format!("cannot read the file: {e}"), help)
     })?;
+    let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    load_bytes(path, &bytes, Some(&base))
+}
+
+/// Parses and validates a document held in memory; `path` names it in messages. External buffer
+/// files are read from `base` (refused when `base` is `None`, e.g. when fuzzing).
+pub(super) fn load_bytes(path: &Path, bytes: &[u8], base: Option<&Path>) -> Result<Loaded, SceneError> {
     let (json_bytes, bin, glb) = if bytes.starts_with(b"glTF") {
-        let chunks = split_glb(path, &bytes)?;
+        let chunks = split_glb(path, bytes)?;
         (chunks.json, chunks.bin, true)
     } else {
-        (bytes.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(&bytes), None, false)
+        (bytes.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(bytes), None, false)
     };
     let mut root: json::Root = serde_json::from_slice(json_bytes).map_err(|e| json_error(path, &e, glb))?;
+    check_version(path, &root)?;
     accept_required_extensions(path, &mut root)?;
     check_position_indices(path, &root)?;
     validate(path, &root)?;
-    let base = path.parent().unwrap_or(Path::new("."));
+    check_layout(path, &root)?;
     let buffers = load_buffers(path, &root, base, bin)?;
     Ok(Loaded { doc: gltf::Document::from_json_without_validation(root), buffers })
 }
@@ -136,6 +149,85 @@ fn json_error(path: &Path, e: &serde_json::Error, glb: bool) -> SceneError {
     SceneError::at(path, format!("{chunk}line {line}, column {column}"), message, help)
 }
 
+/// `asset.version` must be "2.<minor>" (and `asset.minVersion`, when given, at most 2.0): a glTF
+/// 3.0 document may change meanings voltab would silently misread (glTF 2.0 §3.2).
+fn check_version(path: &Path, root: &json::Root) -> Result<(), SceneError> {
+    let two_x = |v: &str| v.strip_prefix("2.").is_some_and(|m| !m.is_empty() && m.bytes().all(|c| c.is_ascii_digit()));
+    if !two_x(&root.asset.version) {
+        return Err(SceneError::at(
+            path,
+            "asset.version",
+            format!("glTF version \"{}\" is not supported", shorten(&root.asset.version)),
+            "voltab reads glTF 2.x; the version must be \"2.0\" (or another 2.minor)",
+        ));
+    }
+    if let Some(min) = root.asset.min_version.as_deref()
+        && min != "2.0"
+    {
+        return Err(SceneError::at(
+            path,
+            "asset.minVersion",
+            format!("the file needs a glTF reader of version {} or newer", shorten(min)),
+            "voltab reads glTF 2.0; re-export the asset for glTF 2.0",
+        ));
+    }
+    Ok(())
+}
+
+/// Layout rules the crate's validator does not check (glTF 2.0 §3.6.2.4): every bufferView lies
+/// inside its buffer's declared `byteLength`, and every accessor's start in the buffer
+/// (`bufferView.byteOffset + accessor.byteOffset`) and its view's stride are multiples of its
+/// component size.
+fn check_layout(path: &Path, root: &json::Root) -> Result<(), SceneError> {
+    for (i, v) in root.buffer_views.iter().enumerate() {
+        let Some(buffer) = root.buffers.get(v.buffer.value()) else { continue };
+        let offset = v.byte_offset.map_or(0, |o| o.0);
+        let end = offset.checked_add(v.byte_length.0);
+        if end.is_none_or(|e| e > buffer.byte_length.0) {
+            return Err(SceneError::at(
+                path,
+                format!("bufferViews[{i}]"),
+                format!(
+                    "byteOffset {offset} + byteLength {} lies outside buffers[{}] (byteLength {})",
+                    v.byte_length.0,
+                    v.buffer.value(),
+                    buffer.byte_length.0
+                ),
+                "the file is corrupt or was written by a broken exporter",
+            ));
+        }
+    }
+    for (i, a) in root.accessors.iter().enumerate() {
+        let (Some(view), Checked::Valid(ct)) = (a.buffer_view, &a.component_type) else { continue };
+        let Some(v) = root.buffer_views.get(view.value()) else { continue };
+        let size = ct.0.size() as u64;
+        let start = v.byte_offset.map_or(0, |o| o.0).saturating_add(a.byte_offset.map_or(0, |o| o.0));
+        if !start.is_multiple_of(size) {
+            return Err(SceneError::at(
+                path,
+                format!("accessors[{i}]"),
+                format!(
+                    "starts at byte {start} of its buffer (bufferViews[{}].byteOffset + byteOffset), not a multiple \
+                     of its {size}-byte component",
+                    view.value()
+                ),
+                "glTF 2.0 requires accessor data aligned to the component size; re-export the asset",
+            ));
+        }
+        if let Some(stride) = v.byte_stride
+            && !(stride.0 as u64).is_multiple_of(size)
+        {
+            return Err(SceneError::at(
+                path,
+                format!("bufferViews[{}].byteStride", view.value()),
+                format!("byteStride {} is not a multiple of the {size}-byte component of accessors[{i}]", stride.0),
+                "glTF 2.0 requires strides aligned to the component size; re-export the asset",
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Rejects required extensions voltab does not understand; moves the rest to `extensionsUsed` so
 /// the gltf crate's validator (which only accepts its built-in readers) does not reject them.
 fn accept_required_extensions(path: &Path, root: &mut json::Root) -> Result<(), SceneError> {
@@ -206,7 +298,7 @@ fn validate(path: &Path, root: &json::Root) -> Result<(), SceneError> {
 fn load_buffers(
     path: &Path,
     root: &json::Root,
-    base: &Path,
+    base: Option<&Path>,
     mut bin: Option<&[u8]>,
 ) -> Result<Vec<Vec<u8>>, SceneError> {
     let mut out = Vec::with_capacity(root.buffers.len());
@@ -224,7 +316,8 @@ fn load_buffers(
                     "only the first buffer of a .glb may omit its uri; give the others a file name or data URI",
                 )
             })?,
-            Some(uri) => read_uri(base, uri).map_err(|(message, help)| SceneError::at(path, &loc, message, help))?,
+            Some(uri) => read_uri(base, uri, buffer.byte_length.0)
+                .map_err(|(message, help)| SceneError::at(path, &loc, message, help))?,
         };
         let want = buffer.byte_length.0;
         if (data.len() as u64) < want {
@@ -235,13 +328,20 @@ fn load_buffers(
                 "the buffer file is truncated or belongs to another version of the asset",
             ));
         }
+        // Bytes past byteLength (GLB padding) are not part of the buffer: views are checked against
+        // what remains.
+        let mut data = data;
+        data.truncate(usize::try_from(want).unwrap_or(usize::MAX));
         out.push(data);
     }
     Ok(out)
 }
 
-/// Resolves a buffer URI (RFC 3986 relative reference, `file:` or `data:`) to its bytes.
-fn read_uri(base: &Path, uri: &str) -> Result<Vec<u8>, (String, String)> {
+/// Resolves a buffer URI (RFC 3986 relative reference, `file:` or `data:`) to its bytes. A file
+/// must be a relative path that stays inside the document's folder (no absolute path, no `..`
+/// climbing out), a regular file, and exactly `byte_length` bytes long (up to 3 bytes of padding
+/// allowed); only `byte_length` bytes are read.
+fn read_uri(base: Option<&Path>, uri: &str, byte_length: u64) -> Result<Vec<u8>, (String, String)> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let Some((header, payload)) = rest.split_once(',') else {
             return Err((format!("malformed data URI (no ','): \"{}\"", shorten(uri)), "see RFC 2397".into()));
@@ -273,13 +373,52 @@ fn read_uri(base: &Path, uri: &str) -> Result<Vec<u8>, (String, String)> {
     let file = String::from_utf8(file).map_err(|_| {
         (format!("uri \"{}\" does not decode to UTF-8", shorten(uri)), "fix the percent-encoding".into())
     })?;
-    let full = base.join(&file);
-    std::fs::read(&full).map_err(|e| {
+    let inside = "buffer files must be relative paths inside the document's folder (glTF URIs are relative references)";
+    let rel = Path::new(&file);
+    if rel.has_root() || rel.components().any(|c| matches!(c, std::path::Component::Prefix(_))) {
+        return Err((format!("buffer uri \"{}\" is an absolute path", shorten(&file)), inside.into()));
+    }
+    let mut depth = 0i64;
+    for c in rel.components() {
+        match c {
+            std::path::Component::ParentDir => depth -= 1,
+            std::path::Component::Normal(_) => depth += 1,
+            _ => {}
+        }
+        if depth < 0 {
+            return Err((
+                format!("buffer uri \"{}\" leads out of the document's folder", shorten(&file)),
+                inside.into(),
+            ));
+        }
+    }
+    let Some(base) = base else {
+        return Err((
+            format!("buffer uri \"{}\" names a file, but this document was read from memory", shorten(&file)),
+            "embed the buffer (GLB BIN chunk or data URI)".into(),
+        ));
+    };
+    let full = base.join(rel);
+    let cannot = |e: std::io::Error| {
         (
             format!("cannot read buffer file \"{file}\" ({}): {e}", full.display()),
             "the .bin file must sit next to the .gltf (URIs are relative to the document's folder)".into(),
         )
-    })
+    };
+    let size = crate::cache::bounded::check_regular(&full, u64::MAX).map_err(cannot)?;
+    if size > byte_length.saturating_add(3) {
+        return Err((
+            format!("buffer file \"{file}\" has {size} bytes but the buffer's byteLength is {byte_length}"),
+            "the byteLength must give the file's size; the file belongs to another version of the asset".into(),
+        ));
+    }
+    if size < byte_length {
+        return Err((
+            format!("the buffer has {size} bytes but its byteLength is {byte_length}"),
+            "the buffer file is truncated or belongs to another version of the asset".into(),
+        ));
+    }
+    crate::cache::bounded::read_regular_range(&full, 0, Some(byte_length), byte_length).map_err(cannot)
 }
 
 fn shorten(s: &str) -> String {

@@ -48,7 +48,16 @@ pub fn vendor_schema() -> serde_json::Value {
 
 /// Reads a `.gltf` or `.glb` file into a scene (not yet checked: [`Scene::load`] runs the checks).
 pub fn import(path: &Path) -> Result<Scene, SceneError> {
-    let loaded = container::load(path)?;
+    convert(path, container::load(path)?)
+}
+
+/// Reads a `.gltf` or `.glb` document held in memory (`path` names it in messages). Buffers must be
+/// embedded (GLB BIN chunk or data URIs): a buffer naming a file is an error.
+pub fn import_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
+    convert(path, container::load_bytes(path, bytes, None)?)
+}
+
+fn convert(path: &Path, loaded: container::Loaded) -> Result<Scene, SceneError> {
     let root = loaded.doc.as_json();
     let mut im = Importer {
         file: path,

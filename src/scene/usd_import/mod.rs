@@ -62,14 +62,17 @@
 //! does not add up (counts vs indices, faces with fewer than 3 vertices, indices out of range),
 //! non-finite points, negative or non-finite light values, invalid camera parameters, a second
 //! global medium. The importer never panics on bad input; a panic inside openusd is caught and
-//! reported as an error. Known limit: openusd 0.6 trusts array lengths stored in `.usdc` files, and a
-//! corrupted one can make it request an impossible allocation, which aborts the process (an
-//! allocation failure is not a panic). Import untrusted binary files in a separate process.
+//! reported as an error. openusd itself can hang (a deleted `>` in a relationship path loops in
+//! `Path::parent`), overflow its stack (instancing) or request an impossible allocation (array
+//! lengths of a corrupt `.usdc`): the `voltab` binary therefore parses every layer in a guarded
+//! child process ([`guard`]: time limit, memory limit, large stack), so those become errors naming
+//! the file.
 //!
 //! openusd's `Stage` is not `Send`; everything is converted on the calling thread into voltab's
 //! own structs.
 
 mod dome;
+pub mod guard;
 mod lights;
 mod mesh;
 mod shade;
@@ -91,8 +94,22 @@ use self::shade::MaterialInfo;
 use self::xform::Frame;
 use super::{Boundary, Density, Light, LightKind, Medium, Scene, SceneError, SceneFormat, SceneWarning};
 
-/// Reads the USD layer at `path` (`.usda`, `.usdc`, `.usd`, `.usdz`) into a [`Scene`] (module doc).
+/// Reads the USD layer at `path` (`.usda`, `.usdc`, `.usd`, `.usdz`) into a [`Scene`] (module doc),
+/// in a guarded child process when running as the `voltab` binary ([`guard`]): a hang or crash
+/// of the parser becomes an error naming the file.
 pub fn import(path: &Path) -> Result<Scene, SceneError> {
+    guard::import(path, import_in_process)
+}
+
+/// For `main`: when this process was started as the guarded import child, runs it and returns its
+/// exit code.
+pub fn guarded_child_main() -> Option<std::process::ExitCode> {
+    let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    guard::child_main(&args, import_in_process)
+}
+
+/// [`import`] in this process (panics inside openusd are caught; hangs and stack overflows are not).
+pub fn import_in_process(path: &Path) -> Result<Scene, SceneError> {
     match catch_unwind(AssertUnwindSafe(|| import_stage(path))) {
         Ok(result) => result,
         Err(panic) => {

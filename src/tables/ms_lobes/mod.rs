@@ -187,8 +187,11 @@ impl MsLobes {
         if let Some(bad) = self.albedos.iter().find(|a| !(0.0..=1.0).contains(*a)) {
             issue("albedos", format!("albedo {bad} is out of range"), "each albedo must lie in [0, 1]".into());
         }
-        let na = self.albedo_values().len();
-        if na == 0 || na > MAX_ALBEDOS {
+        // Expand the grid only once its size passed the check above: albedo_grid = 4294967295 must be
+        // refused, not allocated (issue 37).
+        let grid_ok = self.albedo_grid as usize <= MAX_ALBEDOS;
+        let na = if grid_ok { self.albedo_values().len() } else { 0 };
+        if grid_ok && (na == 0 || na > MAX_ALBEDOS) {
             issue(
                 "albedos",
                 format!("{na} albedo nodes"),

@@ -157,10 +157,20 @@ impl MsLobesTable {
     /// Loads a table; with `needs` = the (albedo, g) pairs of the media to render, only the slices
     /// bracketing them are decompressed.
     pub fn open(path: &Path, needs: Option<&[(f64, f64)]>) -> Result<Self, LobesReadError> {
+        let r = crate::container::VtabReader::open(path)
+            .map_err(|source| LobesReadError::Container { path: path.to_path_buf(), source })?;
+        Self::from_reader(r, path, needs)
+    }
+
+    /// [`Self::open`] on an open reader (e.g. made from bytes); `path` names it in messages.
+    pub fn from_reader(
+        r: crate::container::VtabReader,
+        path: &Path,
+        needs: Option<&[(f64, f64)]>,
+    ) -> Result<Self, LobesReadError> {
         let layout = |m: String| LobesReadError::Layout(format!("{}: {m}", path.display()));
         let container = |source| LobesReadError::Container { path: path.to_path_buf(), source };
-        let (mut r, def) =
-            crate::tables::open_kind(path, (MsLobesRaw::KIND, super::KIND_SCHEMA_VERSION), container, layout)?;
+        let (mut r, def) = crate::tables::check_kind(r, (MsLobesRaw::KIND, super::KIND_SCHEMA_VERSION), layout)?;
         let TableDef::MsLobes(def) = def else {
             return Err(layout("its stored definition is not a readable MsLobes definition".into()));
         };

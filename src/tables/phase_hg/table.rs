@@ -71,6 +71,8 @@ impl PhaseHgTable {
                 h.kind_schema_version
             )));
         }
+        crate::tables::stored_definition(&h, PhaseHgRaw::KIND)
+            .map_err(|m| PhaseHgReadError::Layout(format!("{}: {m}", path.display())))?;
         let mut empty = Self::from_arrays(&h.arrays, &[]).map_err(PhaseHgReadError::Layout)?;
         let idx: Vec<usize> = match wanted {
             None => (0..empty.g.len()).collect(),

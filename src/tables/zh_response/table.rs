@@ -451,10 +451,21 @@ impl ZhResponseTable {
         emitters: Option<&[EmitterProfile]>,
         media_g: Option<&[f64]>,
     ) -> Result<Self, ZhReadError> {
+        let r = crate::container::VtabReader::open(path)
+            .map_err(|source| ZhReadError::Container { path: path.to_path_buf(), source })?;
+        Self::from_reader(r, path, emitters, media_g)
+    }
+
+    /// [`Self::open`] on an open reader (e.g. made from bytes); `path` names it in messages.
+    pub fn from_reader(
+        r: crate::container::VtabReader,
+        path: &Path,
+        emitters: Option<&[EmitterProfile]>,
+        media_g: Option<&[f64]>,
+    ) -> Result<Self, ZhReadError> {
         let layout = |m: String| ZhReadError::Layout(format!("{}: {m}", path.display()));
         let container = |source| ZhReadError::Container { path: path.to_path_buf(), source };
-        let (mut r, def) =
-            crate::tables::open_kind(path, (ZhResponseRaw::KIND, super::KIND_SCHEMA_VERSION), container, layout)?;
+        let (mut r, def) = crate::tables::check_kind(r, (ZhResponseRaw::KIND, super::KIND_SCHEMA_VERSION), layout)?;
         let TableDef::ZhResponse(def) = def else {
             return Err(layout("its stored definition is not a readable ZhResponse definition".into()));
         };

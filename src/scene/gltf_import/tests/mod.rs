@@ -3,6 +3,7 @@
 
 mod errors;
 mod geometry;
+mod hostile;
 mod lights_cameras;
 mod media;
 

@@ -1,0 +1,310 @@
+//! Issue 37's reproducers, each pinned: hostile or corrupt input (pipelines, tables, scenes) gives a
+//! clear error naming the file and a location, a non-zero exit, no panic, no hang and no
+//! allocation beyond what the input justifies.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use common::{run, tempdir, text, write};
+use voltab::container::{END_MAGIC, VtabReader, assemble_unchecked};
+use voltab::pipeline::{DiagnosticKind as K, Disk, PipelineError, load_and_validate};
+use voltab::tables::TableDef;
+
+fn check_text(dir: &Path, body: &str) -> Result<voltab::pipeline::ValidatedPipeline, PipelineError> {
+    let p = write(dir, "p.ron", body);
+    load_and_validate(&p, &Disk)
+}
+
+/// `voltab check` on a pipeline: (success, output, elapsed).
+fn cli_check(dir: &Path, name: &str) -> (bool, String, Duration) {
+    let t = Instant::now();
+    let o = run(&["check", dir.join(name).to_str().expect("utf-8 path")]);
+    (o.status.success(), text(&o), t.elapsed())
+}
+
+/// Issue 37: `albedo_grid: 4294967295` made `voltab check` allocate 34 GB and abort (exit 134);
+/// 100000000 took 4.8 s and 790 MB just to be refused.
+#[test]
+fn huge_albedo_grid_is_a_located_range_error_not_an_abort() {
+    let d = tempdir();
+    for n in ["4294967295", "100000000"] {
+        write(d.path(), "p.ron", &format!("(tables: [MsLobes(id: \"m\", albedo_grid: {n})])"));
+        let (ok, out, took) = cli_check(d.path(), "p.ron");
+        assert!(!ok, "{out}");
+        assert!(out.contains(&format!("albedo_grid = {n} is out of range")), "{out}");
+        assert!(out.contains("p.ron:1:28"), "{out}");
+        assert!(!out.contains("panicked") && !out.contains("memory allocation"), "{out}");
+        assert!(took < Duration::from_secs(10), "{took:?}");
+    }
+}
+
+/// Issue 37: `include: ["/dev/zero"]` read 2 GB; `/dev/urandom` and a FIFO never finished.
+#[test]
+fn includes_of_devices_and_fifos_are_refused_by_name() {
+    let d = tempdir();
+    let fifo = d.path().join("fifo.ron");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success());
+    let mut targets = vec!["/dev/zero".to_owned(), "/dev/urandom".to_owned()];
+    if made {
+        targets.push("fifo.ron".to_owned());
+    }
+    for target in targets {
+        let body = format!("(\n  include: [\"{target}\"],\n)");
+        let t = Instant::now();
+        let e = check_text(d.path(), &body).expect_err(&target);
+        assert!(t.elapsed() < Duration::from_secs(5), "{target}: {:?}", t.elapsed());
+        let s = e.to_string();
+        assert!(e.has(K::Io), "{s}");
+        assert!(s.contains(target.trim_start_matches('/')) && s.contains("not a regular file"), "{s}");
+        assert!(s.contains("p.ron:2:13"), "the include entry is located: {s}");
+    }
+}
+
+/// Issue 37: `include: ["."]` printed an empty path.
+#[test]
+fn including_a_directory_names_it() {
+    let d = tempdir();
+    let e = check_text(d.path(), "(include: [\".\"])").expect_err("directory");
+    let s = e.to_string();
+    assert!(s.contains("cannot read included pipeline") && s.contains("directory"), "{s}");
+    assert!(!s.contains("pipeline :"), "empty path in {s}");
+    assert!(s.contains("p.ron:1:12"), "{s}");
+}
+
+/// Issue 37: non-UTF-8 input lost its location and got a hint about permissions.
+#[test]
+fn non_utf8_pipeline_is_located_at_the_bad_byte() {
+    let d = tempdir();
+    let p = d.path().join("p.ron");
+    std::fs::write(&p, b"(\n  tables: [PhaseHg(id: \"a\xff\")],\n)").expect("write");
+    let e = load_and_validate(&p, &Disk).expect_err("not UTF-8");
+    let s = e.to_string();
+    assert!(s.contains("not valid UTF-8") && s.contains("p.ron:2:26"), "{s}");
+    assert!(s.contains("re-save the file as UTF-8") && !s.contains("permissions"), "{s}");
+}
+
+/// Issue 37: "table #1 has no id" had no location.
+#[test]
+fn a_table_without_id_is_located() {
+    let d = tempdir();
+    let e = check_text(d.path(), "(tables: [\n  PhaseHg(id: \"a\"),\n  PhaseHg(mu_bins: 9),\n])").expect_err("no id");
+    let s = e.to_string();
+    assert!(e.has(K::MissingField), "{s}");
+    assert!(s.contains("table #2 (PhaseHg)") && s.contains("p.ron:3:3"), "{s}");
+}
+
+/// Issue 37: ids written with escapes or as raw strings lost the location of their errors.
+#[test]
+fn escaped_and_raw_string_ids_are_located() {
+    let d = tempdir();
+    for (body, col) in [
+        ("(tables: [\n  PhaseHg(id: \"h\\u{67}\", mu_bins: 0),\n])", 26),
+        ("(tables: [\n  PhaseHg(id: r#\"hg\"#, mu_bins: 0),\n])", 24),
+    ] {
+        let e = check_text(d.path(), body).expect_err("mu_bins 0");
+        let s = e.to_string();
+        assert!(s.contains("table \"hg\"") && s.contains(&format!("p.ron:2:{col}")), "{body} → {s}");
+    }
+}
+
+/// Issue 37: 8,000 tables took 18 s to validate (every lookup searched the whole file).
+#[test]
+fn many_tables_validate_in_linear_time() {
+    let d = tempdir();
+    let mut body = String::from("(tables: [\n");
+    for i in 0..8000 {
+        body.push_str(&format!("  PhaseHg(id: \"t{i}\", g: [0.5], mu_bins: {}),\n", if i % 2 == 0 { 0 } else { 9 }));
+    }
+    body.push_str("])");
+    let t = Instant::now();
+    let e = check_text(d.path(), &body).expect_err("half the tables have mu_bins 0");
+    assert_eq!(e.diagnostics.len(), 4000);
+    assert!(e.to_string().contains("p.ron:8000:"), "the last bad table is located");
+    assert!(t.elapsed() < Duration::from_secs(5), "{:?}", t.elapsed());
+}
+
+/// Issue 37: "did you mean" on a 20,000-character field name took 3.1 s.
+#[test]
+fn a_huge_unknown_field_name_is_reported_quickly() {
+    let d = tempdir();
+    let name = "x".repeat(20_000);
+    let t = Instant::now();
+    let e = check_text(d.path(), &format!("(tables: [PhaseHg(id: \"a\", {name}: 1)])")).expect_err("unknown");
+    assert!(e.has(K::UnknownField), "{e}");
+    assert!(t.elapsed() < Duration::from_secs(2), "{:?}", t.elapsed());
+}
+
+/// The bytes of a golden table with its stored definition replaced (checksums recomputed, as a
+/// buggy tool would leave it).
+fn golden_with_definition(name: &str, edit: impl Fn(&mut TableDef)) -> Vec<u8> {
+    let path = common::root().join("tables/golden").join(name);
+    let bytes = std::fs::read(&path).expect("golden table");
+    let r = VtabReader::open(&path).expect("golden opens");
+    let payload_len: u64 = r.chunks().iter().map(|c| c.stored_len).sum();
+    let end = bytes.len() - END_MAGIC.len();
+    let payload = &bytes[end - payload_len as usize..end];
+    let mut header = r.header().clone();
+    let mut def: TableDef = ron::from_str(&header.definition_ron).expect("stored definition");
+    edit(&mut def);
+    header.definition_ron = def.canonical_ron();
+    assemble_unchecked(&header, r.chunks(), payload)
+}
+
+fn write_bytes(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).expect("write");
+    p
+}
+
+/// Issue 37: `z_min > z_max` in a stored MsLobes definition panicked in ms_lobes/table.rs; `rho_max: 0`
+/// silently returned 0.
+#[test]
+fn inconsistent_stored_lobes_definitions_are_refused_on_open() {
+    let d = tempdir();
+    type Edit = fn(&mut voltab::tables::ms_lobes::MsLobes);
+    let cases: [(&str, Edit); 2] = [("z_min", |m| (m.z_min, m.z_max) = (6.0, -2.0)), ("rho_max", |m| m.rho_max = 0.0)];
+    for (field, edit) in cases {
+        let bytes = golden_with_definition("golden_lobes.vtab", |def| {
+            if let TableDef::MsLobes(m) = def {
+                edit(m);
+            }
+        });
+        let p = write_bytes(d.path(), "lobes.vtab", &bytes);
+        let e = voltab::tables::ms_lobes::MsLobesTable::open(&p, None).expect_err("refused");
+        let s = e.to_string();
+        assert!(s.contains("lobes.vtab") && s.contains("stored definition is invalid") && s.contains(field), "{s}");
+        let o = run(&["verify", p.to_str().expect("utf-8")]);
+        assert!(!o.status.success() && text(&o).contains("stored definition is invalid"), "{}", text(&o));
+    }
+}
+
+/// Issue 37: `g: [NaN, 0.5]` in a stored ZhResponse definition indexed out of bounds.
+#[test]
+fn nan_g_in_a_stored_zh_definition_is_refused_on_open() {
+    let d = tempdir();
+    let bytes = golden_with_definition("golden_zh.vtab", |def| {
+        if let TableDef::ZhResponse(z) = def {
+            z.g = voltab::tables::phase_hg::GValues::List(vec![f64::NAN, 0.5]);
+        }
+    });
+    let p = write_bytes(d.path(), "zh.vtab", &bytes);
+    let e = voltab::tables::zh_response::ZhResponseTable::open(&p, None, None).expect_err("refused");
+    let s = e.to_string();
+    assert!(s.contains("zh.vtab") && s.contains("stored definition is invalid") && s.contains("NaN"), "{s}");
+}
+
+/// Issue 37: a 33 KB `.vtab` holding one 1 GiB run-length zstd chunk (honest header) made `verify`
+/// allocate 2 GiB and abort.
+#[test]
+fn verify_refuses_a_zstd_bomb_quickly() {
+    use std::io::Write;
+    use voltab::container::{Axis, ChunkEntry, ElementType, Transform};
+    let d = tempdir();
+    let r = VtabReader::open(&common::root().join("tables/golden/golden_hg_f32.vtab")).expect("golden");
+    let mut header = r.header().clone();
+    let mut desc = header.arrays[0].clone();
+    desc.quantization = None;
+    desc.element = ElementType::F32;
+    desc.axes = vec![Axis::linear("s", "", 0.0, 1.0, 1), Axis::linear("i", "", 0.0, 1.0, 1 << 28)];
+    header.arrays = vec![desc];
+    let mut enc = zstd::stream::write::Encoder::new(Vec::new(), 3).expect("encoder");
+    let block = vec![0u8; 1 << 20];
+    for _ in 0..1024 {
+        enc.write_all(&block).expect("compress");
+    }
+    let stored = enc.finish().expect("finish");
+    let entry = ChunkEntry {
+        array: 0,
+        slice: 0,
+        offset: 0,
+        stored_len: stored.len() as u64,
+        raw_len: 1 << 30,
+        transform: Transform::Shuffle,
+        crc32: crc32fast::hash(&stored),
+    };
+    let p = write_bytes(d.path(), "bomb.vtab", &assemble_unchecked(&header, &[entry], &stored));
+    assert!(std::fs::metadata(&p).expect("meta").len() < 64 * 1024);
+    let t = Instant::now();
+    let o = run(&["verify", p.to_str().expect("utf-8")]);
+    let out = text(&o);
+    assert!(!o.status.success(), "{out}");
+    assert!(o.status.code().is_some(), "killed by a signal: {out}");
+    assert!(out.contains("bomb.vtab") && out.contains("declares 1073741824 bytes"), "{out}");
+    assert!(t.elapsed() < Duration::from_secs(10), "{:?}", t.elapsed());
+}
+
+/// Issue 37: `PlotPhase(g: [0.3])` on a table without that g passed `check` and failed at `run`.
+#[test]
+fn plot_phase_g_missing_from_its_table_fails_check() {
+    let d = tempdir();
+    let body = "(\n  tables: [PhaseHg(id: \"hg\", g: [0.5, 0.7])],\n  stages: [PlotPhase(id: \"p\", table: \"hg\", g: [0.5, 0.3])],\n)";
+    let e = check_text(d.path(), body).expect_err("g = 0.3 is not in the table");
+    let s = e.to_string();
+    assert!(s.contains("stage \"p\" plots g = 0.3, which table \"hg\" does not hold"), "{s}");
+    assert!(s.contains("p.ron:3:44") && s.contains("0.5, 0.7"), "{s}");
+    check_text(d.path(), &body.replace(", 0.3]", "]")).expect("g values of the table are fine");
+}
+
+/// Issue 37: the example pipeline in schemas/reference.md failed `check` (it overrode a table the
+/// included studio-base.ron does not declare).
+#[test]
+fn the_reference_example_pipeline_checks() {
+    let md = voltab::pipeline::schema::reference_markdown();
+    let start = md.find("```ron\n").expect("example") + 7;
+    let end = start + md[start..].find("```").expect("end of example");
+    let d = tempdir();
+    std::fs::copy(common::root().join("pipelines/studio-base.ron"), d.path().join("studio-base.ron")).expect("copy");
+    check_text(d.path(), &md[start..end]).expect("the example in schemas/reference.md passes check");
+}
+
+/// Issue 37: a `.usda` with one deleted `>` in a relationship path loops forever inside openusd
+/// (`Path::parent`). The guarded child is stopped at the time limit and the error names the file.
+#[test]
+fn a_usd_layer_that_hangs_the_parser_is_stopped_and_named() {
+    let d = tempdir();
+    let src = std::fs::read_to_string(common::root().join("scenes/fog_room.usda")).expect("bundled scene");
+    let broken =
+        src.replacen("rel material:binding = </World/Looks/white>", "rel material:binding = </World/Looks/white", 1);
+    assert_ne!(broken, src, "the relationship to break is in the bundled scene");
+    let p = write(d.path(), "hang.usda", &broken);
+    let t = Instant::now();
+    let o = common::voltab()
+        .args(["scene", p.to_str().expect("utf-8")])
+        .env("VOLTAB_USD_TIME_LIMIT", "3")
+        .output()
+        .expect("spawn");
+    let out = text(&o);
+    assert!(!o.status.success(), "{out}");
+    assert!(out.contains("hang.usda") && out.contains("did not finish within 3s"), "{out}");
+    assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
+}
+
+/// Found by fuzzing (fuzz/artifacts/pipeline/crash-cb7b9cc8…): `id: Some"hg"` is accepted by RON, and
+/// the dangling-preset error of that table lost its file and location.
+#[test]
+fn ids_spelled_as_options_keep_their_location() {
+    let d = tempdir();
+    for id in ["Some\"hg\"", "Some(\"hg\")"] {
+        let body = format!("(tables: [\n  PhaseHg(id: {id}, preset: \"nope\"),\n])");
+        let e = check_text(d.path(), &body).expect_err("dangling preset");
+        let s = e.to_string();
+        assert!(s.contains("preset \"nope\", which is not defined") && s.contains("p.ron:2:"), "{id}: {s}");
+    }
+}
+
+/// Found by fuzzing (fuzz/artifacts/usd/timeout-ccdad09f…): a mutated fog_room.usda on which openusd
+/// does not finish; the guarded child is stopped at the limit and the error names the file.
+#[test]
+fn a_fuzzed_usd_layer_that_hangs_openusd_is_contained() {
+    let p = common::root().join("tests/fixtures/hostile/usd-fuzz-timeout-ccdad09f.usda");
+    let o = common::voltab()
+        .args(["scene", p.to_str().expect("utf-8")])
+        .env("VOLTAB_USD_TIME_LIMIT", "3")
+        .output()
+        .expect("spawn");
+    let out = text(&o);
+    assert!(!o.status.success() && o.status.code().is_some(), "{out}");
+    assert!(out.contains("usd-fuzz-timeout-ccdad09f.usda") && out.contains("the USD reader (openusd)"), "{out}");
+}
