@@ -188,9 +188,13 @@ impl Builder<'_> {
             let id = medium_id(i);
             let mut e = Element::new("medium").attr("id", &id).comment(format!("medium {} ({boundary})", med.name));
             let mut grid_entry = None;
+            // Mitsuba reads an `rgb` as a reflectance (each channel ≤ 1): σ_t = (σ_t / s) · scale s.
+            let s = t.iter().copied().fold(0.0, f64::max);
+            let s = if s > 0.0 { s } else { 1.0 };
+            let mut scale = s;
             match (&med.density, region) {
                 (Density::Homogeneous, _) => {
-                    e = e.attr("type", "homogeneous").child(Element::rgb("sigma_t", t));
+                    e = e.attr("type", "homogeneous").child(Element::rgb("sigma_t", t.map(|x| x / s)));
                 }
                 (Density::ExponentialHeight { .. }, Some((lo, hi))) => {
                     let (grid, entry) = self.height_grid(i, med, lo, hi);
@@ -209,13 +213,14 @@ impl Builder<'_> {
                     );
                     self.files.push((entry.file.clone(), vol::encode(&grid)));
                     grid_entry = Some(entry);
+                    scale = 1.0;
                 }
                 (Density::ExponentialHeight { .. }, None) => {
                     self.warn(&med.name, "exponential density over an empty region: exported homogeneous at density 1");
-                    e = e.attr("type", "homogeneous").child(Element::rgb("sigma_t", t));
+                    e = e.attr("type", "homogeneous").child(Element::rgb("sigma_t", t.map(|x| x / s)));
                 }
             }
-            e = e.child(Element::rgb("albedo", albedo)).child(Element::float("scale", 1.0)).child(phase);
+            e = e.child(Element::rgb("albedo", albedo)).child(Element::float("scale", scale)).child(phase);
             self.m.media.push(MediumEntry {
                 name: med.name.clone(),
                 id,

@@ -22,7 +22,7 @@
 //! - surfaces: opaque → two-sided Lambertian with `base_color` (no material: 0.8 grey, as voltab's
 //!   references; roughness ignored); dielectric with `ior ≠ 1` → smooth `dielectric` (`int_ior` = ior,
 //!   `ext_ior` = 1); `ior = 1`, or a medium boundary without a material → `null` (index-matched);
-//! - media: `homogeneous` (`sigma_t` = σ_s + σ_a, `albedo` = σ_s/σ_t per channel, HG `g`) or, for
+//! - media: `homogeneous` (`sigma_t` · `scale` = σ_s + σ_a, normalised so each rgb channel is ≤ 1 as Mitsuba requires; `albedo` = σ_s/σ_t per channel, HG `g`) or, for
 //!   exponential height fog, `heterogeneous` with a 3-channel `gridvolume` of σ_t·ρ(x) sampled at cell
 //!   centres finely along the fog's direction (relative interpolation error ≤ [`GRID_TOLERANCE`]² / 8 per
 //!   cell); a closed medium mesh gets `interior` = its medium and `exterior` = the medium around it;

@@ -20,8 +20,9 @@ fn fog_room_global_medium_box_floor_and_lights() {
     assert!(xml.contains("<shape type=\"cube\" id=\"global_medium_box\">"), "{xml}");
     assert!(xml.contains("<ref name=\"interior\" id=\"medium_0\"/>"));
     assert!(xml.contains("<medium id=\"medium_0\" type=\"homogeneous\">"));
-    // σ_t = 0.11, albedo 0.1/0.11.
-    assert!(xml.contains(&format!("<rgb name=\"sigma_t\" value=\"{0}, {0}, {0}\"/>", xml::num(0.1 + 0.01))));
+    // σ_t = 0.11 as rgb 1 × scale 0.11 (Mitsuba's rgb must be ≤ 1), albedo 0.1/0.11.
+    assert!(xml.contains("<rgb name=\"sigma_t\" value=\"1.0, 1.0, 1.0\"/>"));
+    assert!(xml.contains(&format!("<float name=\"scale\" value=\"{}\"/>", xml::num(0.1 + 0.01))));
     assert!(xml.contains(&format!("<rgb name=\"albedo\" value=\"{0}, {0}, {0}\"/>", xml::num(0.1 / 0.11))));
     assert!(xml.contains("<point name=\"position\" x=\"2.0\" y=\"2.0\" z=\"2.0\"/>"));
     assert!(xml.contains("<rgb name=\"intensity\" value=\"1.0, 1.0, 1.0\"/>"));
