@@ -238,6 +238,10 @@ enum ExportCommand {
         /// Default samples per pixel.
         #[arg(long, default_value_t = 64)]
         spp: u32,
+        /// Also write texels.json: this many of the lightmap bake's texels with its Surface and Shadow
+        /// irradiance and voltab's internal reference there (0: none).
+        #[arg(long, default_value_t = 0)]
+        texels: usize,
     },
 }
 
@@ -810,9 +814,9 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
         }
         Command::Eval { what: EvalCommand::Zh(a) } => eval_zh(&a)?,
         Command::Eval { what: EvalCommand::Lobes(a) } => eval_lobes(&a)?,
-        Command::Export { what: ExportCommand::Mitsuba { file, out, camera, width, height, spp } } => {
+        Command::Export { what: ExportCommand::Mitsuba { file, out, camera, width, height, spp, texels } } => {
             let scene = load_scene(&file)?;
-            let options = voltab::reference::mitsuba::ExportOptions { camera, width, height, spp };
+            let options = voltab::reference::mitsuba::ExportOptions { camera, width, height, spp, texels };
             let m = voltab::reference::mitsuba::export(&scene, &options, &out).map_err(|e| anyhow::anyhow!("{e}"))?;
             println!(
                 "wrote {} ({} shapes, {} media, {} lights)",

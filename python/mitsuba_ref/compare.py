@@ -8,9 +8,10 @@ independent runs, as the harness reports), per item (texel, pixel, point; channe
 - corrected MSE = raw − mean(var_r) (− mean(var_a) when the method is noisy too);
 - everything relative to the reference's converged mean level `norm = mean(r)` (never its maximum or a
   percentile, which noise inflates);
-- the floor: the smallest relative RMSE the comparison can tell from zero, sqrt(2 · se) / norm with se
-  the standard error of the corrected MSE over the items (the spread of (a − r)² − var_r); a corrected
-  relative RMSE below it is reported as "< floor X", never as a smaller number. (The variances come from
+- the floor: the smallest relative RMSE the comparison can tell from zero, sqrt(2 · se0) / norm with se0
+  the standard error of the corrected MSE of an exact method (the reference's noise alone: the squared
+  Gaussian noise of the n items); a corrected relative RMSE below it is reported as "< floor X", never
+  as a smaller number. It depends on the reference's noise only. (The variances come from
   a few independent runs; their own uncertainty is not included.)
 """
 import math
@@ -30,9 +31,10 @@ def noise_corrected(a, r, var_r, var_a=None):
     raw = float(np.mean((a - r) ** 2))
     noise = float(np.mean(var_r)) + (float(np.mean(np.asarray(var_a, float))) if var_a is not None else 0.0)
     corrected = raw - noise
-    per_item = (a - r) ** 2 - var_r
-    se = float(np.std(per_item, ddof=1)) / math.sqrt(per_item.size) if per_item.size > 1 else float(np.mean(var_r))
-    floor = math.sqrt(2.0 * se) / norm
+    # With no error, (a − r)² is the reference's squared noise: variance 2 var_r² per item (Gaussian
+    # means), so the corrected MSE of an exact method scatters by se0 = sqrt(mean(2 var_r²) / n).
+    se0 = math.sqrt(float(np.mean(2.0 * var_r**2)) / var_r.size)
+    floor = math.sqrt(2.0 * se0) / norm
     rel = math.sqrt(max(corrected, 0.0)) / norm
     below = rel < floor
     text = f"< floor {floor:.3g}" if below else f"{rel:.4g} (floor {floor:.3g})"

@@ -2,7 +2,7 @@
 
 use super::build::spot_falloff_difference;
 use super::*;
-use crate::scene::{Density, Light, LightKind, fixtures};
+use crate::scene::{Density, Light, LightKind, Surface, fixtures};
 
 fn xml_of(scene: &Scene) -> (String, Built) {
     let b = build(scene, &ExportOptions::default()).expect("builds");
