@@ -5,9 +5,10 @@ bundled scenes), imported and exported by the voltab binary (VOLTAB_BIN), render
 
 - point light: E = I cos θ / r² (I = candela / 683), zero behind the receiver;
 - directional light: E = E⊥ cos θ (E⊥ = lux / 683);
-- Beer–Lambert: a global absorbing medium, an exponential height fog (the `.vol` grid), between a point light and the receiver (e^{−σ_a r}), and a
+- Beer–Lambert: a global absorbing medium between a point light and the receiver (e^{−σ_a r}), and a
   directional light entering the global medium's box at its top face (the box from the documented model:
-  scene bounds + 1 % of the diagonal + 1 mm), and an index-matched slab mesh (e^{−σ_t H / cos});
+  scene bounds + 1 % of the diagonal + 1 mm), an index-matched slab mesh (e^{−σ_t H / cos}), and global
+  exponential height fog exported as a `.vol` grid (τ = σ_a (r/Δy)(1 − e^{−bΔy})/b);
 - single scattering in a homogeneous slab lit by a normal-incidence sun, at a receiver under the slab,
   against a 1-D Gauss–Legendre quadrature of the closed-form single-scattered radiance;
 - the camera: an emitter up and to the right of the view axis shows up and to the right at the pixel the
