@@ -25,8 +25,16 @@ if [ "${VOLTAB_GPU:-1}" != 0 ]; then
   chmod 700 "$XDG_RUNTIME_DIR"
 fi
 
-step "Python venv for interchange checks (.venv)"
-req="usd-core OpenImageIO jsonschema pytest numpy"
+step "libLLVM >= 16 for Mitsuba's fast llvm_ad_rgb variant (Debian's libllvm19; the harness falls back to scalar_rgb without it)"
+if ! ls /usr/lib/*-linux-gnu/libLLVM-19.so* /usr/lib/*-linux-gnu/libLLVM.so.19* >/dev/null 2>&1; then
+  as_root=()
+  [ "$(id -u)" = 0 ] || as_root=(sudo)
+  { "${as_root[@]}" apt-get update -qq && DEBIAN_FRONTEND=noninteractive "${as_root[@]}" apt-get install -y -qq libllvm19 >/dev/null; } ||
+    echo "libllvm19 not installed: the Mitsuba tests run on the (slower) scalar_rgb variant"
+fi
+
+step "Python venv for interchange checks and the Mitsuba reference (.venv)"
+req="usd-core OpenImageIO jsonschema pytest numpy mitsuba"
 if [ ! -x .venv/bin/python ] || [ "$(cat .venv/.voltab-req 2>/dev/null)" != "$req" ]; then
   rm -rf .venv
   python3 -m venv .venv

@@ -200,6 +200,11 @@ enum Command {
         #[arg(long)]
         all: bool,
     },
+    /// Write a scene as another renderer's scene (the independent references of issue 30).
+    Export {
+        #[command(subcommand)]
+        what: ExportCommand,
+    },
     /// Write or check `schemas/` (JSON Schema and reference page) from the code.
     Schema {
         /// Folder to write into.
@@ -208,6 +213,35 @@ enum Command {
         /// Fail if the files differ instead of writing them.
         #[arg(long)]
         check: bool,
+    },
+}
+
+#[derive(Subcommand)]
+enum ExportCommand {
+    /// Mitsuba 3: `scene.xml`, binary PLY meshes, `.vol` grid volumes and `export.json` (what became what,
+    /// units, the region the global medium fills, approximations); see `voltab::reference::mitsuba`.
+    Mitsuba {
+        /// Scene file (.gltf, .glb, .usd, .usda, .usdc, .usdz).
+        file: PathBuf,
+        /// Output folder (created; earlier files replaced).
+        #[arg(long)]
+        out: PathBuf,
+        /// Camera to export as the sensor (default: the scene's first).
+        #[arg(long)]
+        camera: Option<String>,
+        /// Default image width [px].
+        #[arg(long, default_value_t = 256)]
+        width: u32,
+        /// Default image height [px] (default: from the camera's aspect ratio).
+        #[arg(long)]
+        height: Option<u32>,
+        /// Default samples per pixel.
+        #[arg(long, default_value_t = 64)]
+        spp: u32,
+        /// Also write texels.json: this many of the lightmap bake's texels with its Surface and Shadow
+        /// irradiance and voltab's internal reference there (0: none).
+        #[arg(long, default_value_t = 0)]
+        texels: usize,
     },
 }
 
@@ -783,6 +817,21 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
         }
         Command::Eval { what: EvalCommand::Zh(a) } => eval_zh(&a)?,
         Command::Eval { what: EvalCommand::Lobes(a) } => eval_lobes(&a)?,
+        Command::Export { what: ExportCommand::Mitsuba { file, out, camera, width, height, spp, texels } } => {
+            let scene = load_scene(&file)?;
+            let options = voltab::reference::mitsuba::ExportOptions { camera, width, height, spp, texels };
+            let m = voltab::reference::mitsuba::export(&scene, &options, &out).map_err(|e| anyhow::anyhow!("{e}"))?;
+            println!(
+                "wrote {} ({} shapes, {} media, {} lights)",
+                out.join(&m.scene_xml).display(),
+                m.shapes.len(),
+                m.media.len(),
+                m.lights.len()
+            );
+            for w in &m.warnings {
+                eprintln!("warning: {}: {}", w.location, w.message);
+            }
+        }
         Command::Stability { all } => {
             let rows = voltab::stability::rows();
             let failed = rows.iter().filter(|r| !r.ok()).count();

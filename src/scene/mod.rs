@@ -29,6 +29,7 @@
 
 pub mod bvh;
 pub mod check;
+pub mod extent;
 #[cfg(test)]
 pub(crate) mod fixtures;
 pub mod gltf_import;

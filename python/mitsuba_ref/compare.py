@@ -1,0 +1,42 @@
+"""Errors against a noisy reference that cannot flatter (issue 30).
+
+Given a method's values `a` and the reference's mean `r` with the variance of that mean `var_r` (from
+independent runs, as the harness reports), per item (texel, pixel, point; channels flattened):
+
+- raw MSE  = mean((a − r)²), which overstates the error by the reference's noise: E[(a − r)²] =
+  (a − r_true)² + Var(r);
+- corrected MSE = raw − mean(var_r) (− mean(var_a) when the method is noisy too);
+- everything relative to the reference's converged mean level `norm = mean(r)` (never its maximum or a
+  percentile, which noise inflates);
+- the floor: the smallest relative RMSE the comparison can tell from zero, sqrt(2 · se0) / norm with se0
+  the standard error of the corrected MSE of an exact method (the reference's noise alone: the squared
+  Gaussian noise of the n items); a corrected relative RMSE below it is reported as "< floor X", never
+  as a smaller number. It depends on the reference's noise only. (The variances come from
+  a few independent runs; their own uncertainty is not included.)
+"""
+import math
+
+import numpy as np
+
+
+def noise_corrected(a, r, var_r, var_a=None):
+    """dict(rel_rmse, floor, below_floor, raw_rel_rmse, norm, text)."""
+    a, r, var_r = (np.asarray(x, float).ravel() for x in (a, r, var_r))
+    if a.shape != r.shape or r.shape != var_r.shape:
+        raise ValueError(f"shapes differ: method {a.shape}, reference {r.shape}, variance {var_r.shape}")
+    norm = float(np.mean(r))
+    if not norm > 0.0:
+        raise ValueError("the reference's mean is not positive: an error relative to it is meaningless "
+                         "(an empty reference judges nothing)")
+    raw = float(np.mean((a - r) ** 2))
+    noise = float(np.mean(var_r)) + (float(np.mean(np.asarray(var_a, float))) if var_a is not None else 0.0)
+    corrected = raw - noise
+    # With no error, (a − r)² is the reference's squared noise: variance 2 var_r² per item (Gaussian
+    # means), so the corrected MSE of an exact method scatters by se0 = sqrt(mean(2 var_r²) / n).
+    se0 = math.sqrt(float(np.mean(2.0 * var_r**2)) / var_r.size)
+    floor = math.sqrt(2.0 * se0) / norm
+    rel = math.sqrt(max(corrected, 0.0)) / norm
+    below = rel < floor
+    text = f"< floor {floor:.3g}" if below else f"{rel:.4g} (floor {floor:.3g})"
+    return {"rel_rmse": None if below else rel, "floor": floor, "below_floor": below,
+            "raw_rel_rmse": math.sqrt(raw) / norm, "norm": norm, "text": text}
