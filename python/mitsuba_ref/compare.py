@@ -20,7 +20,7 @@ import numpy as np
 
 
 def noise_corrected(a, r, var_r, var_a=None):
-    """dict(rel_rmse, floor, below_floor, raw_rel_rmse, norm, text)."""
+    """dict(rel_rmse, floor, below_floor, ci95, raw_rel_rmse, norm, text)."""
     a, r, var_r = (np.asarray(x, float).ravel() for x in (a, r, var_r))
     if a.shape != r.shape or r.shape != var_r.shape:
         raise ValueError(f"shapes differ: method {a.shape}, reference {r.shape}, variance {var_r.shape}")
@@ -37,6 +37,11 @@ def noise_corrected(a, r, var_r, var_a=None):
     floor = math.sqrt(2.0 * se0) / norm
     rel = math.sqrt(max(corrected, 0.0)) / norm
     below = rel < floor
+    # 95 % interval: per item (a − r)² has variance 2 var_r² + 4 d² var_r for a true difference d (Gaussian
+    # means), d² estimated by max((a − r)² − var_r, 0); the corrected MSE's standard error follows.
+    d2 = np.maximum((a - r) ** 2 - var_r, 0.0)
+    se = math.sqrt(float(np.sum(2.0 * var_r**2 + 4.0 * d2 * var_r))) / var_r.size
+    ci95 = [math.sqrt(max(corrected - 1.96 * se, 0.0)) / norm, math.sqrt(max(corrected + 1.96 * se, 0.0)) / norm]
     text = f"< floor {floor:.3g}" if below else f"{rel:.4g} (floor {floor:.3g})"
-    return {"rel_rmse": None if below else rel, "floor": floor, "below_floor": below,
+    return {"rel_rmse": None if below else rel, "floor": floor, "below_floor": below, "ci95": ci95,
             "raw_rel_rmse": math.sqrt(raw) / norm, "norm": norm, "text": text}

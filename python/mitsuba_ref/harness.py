@@ -8,6 +8,11 @@ Request (JSON; paths relative to the request file):
          "spp": 256, "max_depth": [2, -1]},
         {"kind": "radiance", "name": "rays", "origins": [...], "directions": [...], "spp": 64,
          "max_depth": [-1]}]}
+A query may also carry `"minus_depth": k` (the estimate at max_depth k, from other seeds, is subtracted:
+light of exactly the orders between, e.g. max_depth [2] minus 1 = single scattering and single surface
+reflection without directly visible emitters) and `"methods": [{"name": ..., "values": [[r, g, b], ...]}]`
+(one RGB value per item, pixels row-major for images): each is compared with the reference by
+`compare.noise_corrected` into the result's `comparisons`.
 Result (`out`): per query and max_depth, `mean` (per item, RGB) and `var_of_mean` (the variance of the
 mean over the runs, i.e. sample variance / runs), the run count, the seconds spent; images also as EXR
 files beside `out` (`<stem>_<name>_d<max_depth>_mean.exr` and `..._var.exr`). Every file is written to a
@@ -37,6 +42,7 @@ import time
 
 import numpy as np
 
+from . import compare as _compare
 from . import variant as _variant
 
 
@@ -279,6 +285,16 @@ def _write_exr(mi, path, array):
     os.replace(tmp, path)
 
 
+def _comparison(method, mean, var):
+    """One method's values against the reference (mean, variance of the mean), or why not."""
+    try:
+        c = _compare.noise_corrected(method["values"], np.asarray(mean).reshape(-1, 3), np.asarray(var).reshape(-1, 3))
+    except (KeyError, ValueError) as e:
+        return {"method": method.get("name"), "error": str(e)}
+    c["method"] = method.get("name")
+    return c
+
+
 def run_request(request, base="."):
     """Runs a request dict (module doc); returns the result dict (also written to `out`)."""
     root = pathlib.Path(base).resolve().parent
@@ -294,15 +310,30 @@ def run_request(request, base="."):
     results = []
     for q in request["queries"]:
         kind, name = q.get("kind"), q.get("name", q.get("kind"))
+        minus = q.get("minus_depth")
         for depth in q.get("max_depth", [-1]):
             t0 = time.perf_counter()
             entry = {"name": name, "kind": kind, "max_depth": depth, "runs": runs}
-            if kind == "irradiance":
-                m, v = ref.irradiance(q["points"], q["normals"], q.get("spp", 256), depth, runs, seed, rr)
-            elif kind == "radiance":
-                m, v = ref.radiance(q["origins"], q["directions"], q.get("spp", 64), depth, runs, seed, rr)
-            elif kind == "image":
-                m, v = ref.image(q.get("spp", 16), depth, runs, seed, q.get("width"), q.get("height"), rr)
+
+            def evaluate(d, s):
+                if kind == "irradiance":
+                    return ref.irradiance(q["points"], q["normals"], q.get("spp", 256), d, runs, s, rr)
+                if kind == "radiance":
+                    return ref.radiance(q["origins"], q["directions"], q.get("spp", 64), d, runs, s, rr)
+                if kind == "image":
+                    return ref.image(q.get("spp", 16), d, runs, s, q.get("width"), q.get("height"), rr)
+                raise RequestError(f'query "{name}": unknown kind "{kind}" (image, irradiance or radiance)')
+
+            m, v = evaluate(depth, seed)
+            if minus is not None:
+                # Light of exactly the orders in (minus_depth, max_depth]: the difference of two
+                # independent estimates (other seeds), so their variances add.
+                m1, v1 = evaluate(int(minus), seed + 7919)
+                m, v = np.asarray(m) - np.asarray(m1), np.asarray(v) + np.asarray(v1)
+                entry["minus_depth"] = int(minus)
+            if q.get("methods"):
+                entry["comparisons"] = [_comparison(meth, m, v) for meth in q["methods"]]
+            if kind == "image":
                 stem = f"{out.stem}_{name}_d{depth}"
                 _write_exr(ref.mi, out.parent / f"{stem}_mean.exr", m)
                 _write_exr(ref.mi, out.parent / f"{stem}_var.exr", v)
@@ -310,8 +341,6 @@ def run_request(request, base="."):
                 entry["image_mean"] = m.reshape(-1, 3).mean(axis=0).tolist()
                 m, v = None, np.asarray(v).reshape(-1, 3).mean(axis=0)
                 entry["pixel_var_of_mean_avg"] = v.tolist()
-            else:
-                raise RequestError(f'query "{name}": unknown kind "{kind}" (image, irradiance or radiance)')
             if m is not None:
                 entry["mean"] = np.asarray(m).tolist()
                 entry["var_of_mean"] = np.asarray(v).tolist()

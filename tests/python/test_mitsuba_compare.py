@@ -36,3 +36,19 @@ def test_error_below_the_noise_floor_is_reported_as_a_floor():
 def test_empty_reference_is_refused():
     with pytest.raises(ValueError, match="empty reference"):
         noise_corrected([1.0, 2.0], [0.0, 0.0], [0.0, 0.0])
+
+
+def test_confidence_interval_covers_the_true_error_about_95_percent_of_the_time():
+    # 400 independent noisy references of one method with a known 8 % error: the 95 % interval must
+    # contain the true relative RMSE in about 95 % of them (binomial: 380 ± 9; accept 360 to 395).
+    rng = np.random.default_rng(3)
+    truth = rng.uniform(0.5, 1.5, 2000)
+    a = truth * 1.08
+    want = np.sqrt(np.mean((0.08 * truth) ** 2)) / np.mean(truth)
+    sigma = 0.1
+    hits = 0
+    for _ in range(400):
+        r = truth + rng.normal(0, sigma, truth.size)
+        lo, hi = noise_corrected(a, r, np.full(truth.size, sigma**2))["ci95"]
+        hits += lo <= want <= hi
+    assert 360 <= hits <= 395, hits
