@@ -59,7 +59,9 @@ step "cargo doc (warnings are errors)"
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --quiet "${features[@]}"
 
 step "Python interchange checks"
-VOLTAB_BIN="$(pwd)/target/debug/voltab" .venv/bin/python -m pytest -q tests/python
+# test_validate.py runs `voltab validate --quality quick` with the release binary the run_report step built.
+VOLTAB_BIN="$(pwd)/target/debug/voltab" VOLTAB_RELEASE_BIN="$(pwd)/target/release/voltab" \
+  .venv/bin/python -m pytest -q tests/python
 
 # Fuzz smoke run (issue 37): opt-in, since its instrumented release build of every dependency is
 # long on a shared machine. VOLTAB_FUZZ_SMOKE=60 runs each fuzz target for 60 s.

@@ -31,6 +31,7 @@
 //! - [`physics`]: phase functions and counter-based random streams (one home per concept).
 //! - [`reference`](mod@reference): independent high-precision references the tables are judged against.
 //! - [`report`]: error-against-run-time reports and plots.
+//! - [`validation`]: `voltab validate`, every stage against Mitsuba 3 (the independent reference).
 //! - [`bench`](mod@bench): timings measured side by side, printed as ratios.
 //! - [`stability`]: the extreme-input matrix every formula must survive.
 //!
@@ -53,3 +54,4 @@ pub mod scene;
 pub mod stability;
 pub mod stages;
 pub mod tables;
+pub mod validation;

@@ -200,6 +200,26 @@ enum Command {
         #[arg(long)]
         all: bool,
     },
+    /// Judge every stage of a pipeline against Mitsuba 3 (the independent reference renderer): writes
+    /// validation.json, validation.md, a picture per stage and error_vs_time.png. Needs Python with
+    /// `mitsuba` (.venv from scripts/test-all.sh, or VOLTAB_PYTHON).
+    Validate {
+        /// Pipeline file.
+        #[arg(default_value = "pipelines/default.ron")]
+        pipeline: PathBuf,
+        /// Only these stage ids (all when absent).
+        #[arg(long, num_args = 1.., value_delimiter = ',')]
+        stages: Vec<String>,
+        /// quick: low resolution and few texels (minutes; CI); full: the stages' own size (opt-in, long).
+        #[arg(long, value_enum, default_value = "quick")]
+        quality: voltab::validation::Quality,
+        /// Output folder.
+        #[arg(long, default_value = "out/validate")]
+        out: PathBuf,
+        /// Where the pipeline's tables are compiled (cached).
+        #[arg(long, default_value = "out")]
+        tables: PathBuf,
+    },
     /// Write a scene as another renderer's scene (the independent references of issue 30).
     Export {
         #[command(subcommand)]
@@ -512,6 +532,52 @@ fn planned(p: ValidatedPipeline, scenes: &[PathBuf], quiet: bool) -> Result<Vali
     }
     plan.pruned_pipeline(&p, &pipeline::Limits::from_machine())
         .map_err(|e| anyhow::anyhow!("{}: {e}", p.path().display()))
+}
+
+/// `voltab validate`: each selected stage made comparable, judged by Mitsuba, written as a report.
+fn validate(
+    pipeline: &Path,
+    only: &[String],
+    quality: voltab::validation::Quality,
+    out: &Path,
+    tables: &Path,
+    progress: bool,
+) -> Result<()> {
+    use voltab::validation::{self, Validation, cases};
+    let p = compiled_for_stages(pipeline, tables, progress)?
+        .ok_or_else(|| anyhow::anyhow!("{}: no stage reads a scene; nothing to validate", pipeline.display()))?;
+    if let Some(bad) = only.iter().find(|id| !p.stages().iter().any(|s| s.id() == id.as_str())) {
+        let ids: Vec<&str> = p.stages().iter().map(|s| s.id()).collect();
+        bail!("{}: no stage \"{bad}\" (stages: {})", pipeline.display(), ids.join(", "));
+    }
+    let base = base_dir(&p);
+    let device = voltab::render::gpu::Device::Cpu;
+    let ctx = voltab::stages::StageContext { out_dir: tables, base_dir: &base, progress, device: &device };
+    let harness = validation::python::Harness::locate();
+    let mut results = Vec::new();
+    for s in p.stages().iter().filter(|s| only.is_empty() || only.iter().any(|id| id == s.id())) {
+        let dir = out.join(s.id());
+        eprintln!("validate   {:<20} {}", s.id(), s.def().kind());
+        let r = match cases::prepare(s.id(), s.def(), &ctx, quality, &dir.join("stage"))? {
+            cases::Prepared::Case(case) => validation::judge(&case, &dir, &harness)?,
+            cases::Prepared::NotCompared(why) => validation::not_compared(s.id(), s.def().kind(), &why),
+        };
+        for m in &r.methods {
+            println!(
+                "validate   {:<20} {:<10} {} ({:.0} ms; Mitsuba {:.0} s)",
+                r.stage, m.name, m.text, m.ms, r.reference_s
+            );
+        }
+        if let Some(why) = &r.not_compared {
+            println!("validate   {:<20} not compared: {why}", r.stage);
+        }
+        results.push(r);
+    }
+    let v = Validation { pipeline: pipeline.to_path_buf(), quality, stages: results };
+    let files = validation::write(&v, out)?;
+    print!("{}", validation::markdown(&v));
+    println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
+    Ok(())
 }
 
 fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
@@ -842,6 +908,9 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             if failed > 0 {
                 return Ok(ExitCode::FAILURE);
             }
+        }
+        Command::Validate { pipeline, stages, quality, out, tables } => {
+            validate(&pipeline, &stages, quality, &out, &tables, progress)?;
         }
         Command::Schema { dir, check } => {
             let files = [

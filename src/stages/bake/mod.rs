@@ -426,6 +426,22 @@ impl BakeLightmaps {
         Ok(r)
     }
 
+    /// `voltab validate`: every mode of this stage at `count` texels of its atlas (the subset its own
+    /// reference check uses), at the stage's samples per texel, with the time of each mode. The scene is
+    /// returned too, so the caller judges the texels against an independent renderer on the same import.
+    pub fn texel_check(&self, id: &str, ctx: &StageContext, count: usize) -> Result<TexelCheck, StageError> {
+        let fail = |message: String| StageError::Input { stage: id.into(), message, help: "check the table".into() };
+        let Prepared { scene, bvh, table, atlas, .. } = self.prepare(id, ctx)?;
+        let points = report::subset(&atlas, count);
+        let mut modes = Vec::new();
+        for &mode in &self.modes {
+            let (irradiance, ms) =
+                report::bake(&scene, &bvh, table.as_ref(), self, mode, self.samples, &points).map_err(fail)?;
+            modes.push((mode, irradiance, ms));
+        }
+        Ok(TexelCheck { scene, points, modes })
+    }
+
     /// `voltab bench --bake`: every mode over the whole atlas at this stage's quality (texels/s, rays/s,
     /// overhead of Shadow and Full over Surface measured in one run), and the speed-up of the Full bake
     /// over the brute-force reference at equal error on a 256-texel subset (the [`report::ladder`]).
@@ -640,6 +656,17 @@ struct Prepared {
     bvh_ms: f64,
     table_ms: f64,
     atlas_ms: f64,
+}
+
+/// The bake at a subset of its texels ([`BakeLightmaps::texel_check`]).
+#[derive(Debug)]
+pub struct TexelCheck {
+    /// The imported scene the bake read.
+    pub scene: Scene,
+    /// The texels.
+    pub points: Vec<TexelPoint>,
+    /// Per mode: irradiance per texel \[W/m²\], RGB, and the wall time \[ms\].
+    pub modes: Vec<(BakeMode, Vec<[f64; 3]>, f64)>,
 }
 
 /// A receiver of the bake.

@@ -1,0 +1,101 @@
+"""`voltab validate pipelines/default.ron --quality quick` (issue 30's "done when"): every stage of the
+default pipeline judged against Mitsuba 3, with errors that cannot flatter.
+
+Pinned here:
+- every stage of the pipeline is in validation.json, compared or listed with the reason it is not;
+- every compared error is noise-corrected and stated against its floor: a number is never below the
+  floor, the 95 % interval contains it, and the floor is small enough (≤ 5 %) to judge the technique
+  issues' targets;
+- the technique targets that the quick comparison covers, at the issues' thresholds. Targets the stages
+  miss today are strict xfails carrying the measured numbers (an unexpected pass fails, so the mark must
+  be removed when a fix lands).
+
+The release binary runs it (the default pipeline's ZH tables take minutes to compile in a debug build):
+VOLTAB_RELEASE_BIN, else target/release/voltab (scripts/test-all.sh builds it for the run_report test).
+"""
+import json
+import os
+import pathlib
+import subprocess
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+VOLTAB = os.environ.get("VOLTAB_RELEASE_BIN", str(ROOT / "target" / "release" / "voltab"))
+
+pytest.importorskip("mitsuba")
+
+
+@pytest.fixture(scope="module")
+def validation(tmp_path_factory):
+    assert pathlib.Path(VOLTAB).exists(), f"{VOLTAB} is missing: run `cargo build --release` first"
+    out = tmp_path_factory.mktemp("validate")
+    env = dict(os.environ, VOLTAB_PYTHONPATH=str(ROOT / "python"))
+    r = subprocess.run([VOLTAB, "validate", str(ROOT / "pipelines" / "default.ron"), "--quality", "quick",
+                        "--out", str(out / "report"), "--tables", str(out / "tables")],
+                       capture_output=True, text=True, timeout=1800, cwd=ROOT, env=env)
+    assert r.returncode == 0, r.stderr[-4000:]
+    print("\n" + r.stdout)
+    v = json.loads((out / "report" / "validation.json").read_text())
+    return out / "report", v, {s["stage"]: s for s in v["stages"]}
+
+
+def stage_ids():
+    r = subprocess.run([VOLTAB, "check", str(ROOT / "pipelines" / "default.ron")], capture_output=True,
+                       text=True, timeout=120, check=True)
+    return [line.split()[1] for line in r.stdout.splitlines() if line.strip().startswith("stage ")]
+
+
+def method(stages, stage, name):
+    return next(m for m in stages[stage]["methods"] if m["name"] == name)
+
+
+def test_every_stage_is_judged_or_says_why_not(validation):
+    folder, v, stages = validation
+    assert sorted(stages) == sorted(stage_ids())
+    md = (folder / "validation.md").read_text()
+    assert (folder / "error_vs_time.png").stat().st_size > 1000
+    for sid, s in stages.items():
+        assert sid in md
+        if s["not_compared"] is not None:
+            assert s["kind"] == "PlotPhase" or "issue" in s["not_compared"], s
+            continue
+        assert s["methods"] and s["reference_runs"] >= 4 and s["reference_s"] > 0
+        for f in s["files"]:
+            assert pathlib.Path(f).exists(), f
+        for m in s["methods"]:
+            assert m["floor"] is not None and 0 < m["floor"] <= 0.05, (sid, m)
+            if m["rel_rmse"] is None:
+                assert m["text"] == f"< floor {m['floor']:.3g}", m
+            else:
+                lo, hi = m["ci95"]
+                assert m["rel_rmse"] >= m["floor"] and lo <= m["rel_rmse"] <= hi, (sid, m)
+                # The reference's noise only ever inflates the raw error.
+                assert m["raw_rel_rmse"] >= m["rel_rmse"], (sid, m)
+    compared = {s["kind"] for s in stages.values() if s["not_compared"] is None}
+    assert {"BakeLightmaps", "EpipolarShadows"} <= compared
+
+
+def test_bake_full_mode_meets_issue_31_error_and_mean_targets(validation):
+    _, _, stages = validation
+    full = method(stages, "fog_room_bake", "full")
+    assert full["rel_rmse"] is None or full["rel_rmse"] <= 0.10, full
+    assert abs(full["method_mean"] / full["reference_mean"] - 1) <= 0.03, full
+
+
+@pytest.mark.xfail(strict=True, reason="issue 31: on the fog room's 64 quick texels the Full mode (128 samples "
+                   "per texel) measures 9.3 % [8.1, 10.3] against Surface's 7.8 % [5.9, 9.3] (floor 3.3 %)")
+def test_bake_full_mode_is_never_worse_than_surface_or_shadow(validation):
+    _, _, stages = validation
+    full = method(stages, "fog_room_bake", "full")["rel_rmse"] or 0.0
+    for other in ("surface", "shadow"):
+        assert full <= (method(stages, "fog_room_bake", other)["rel_rmse"] or 0.0)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 32: the window room's in-scatter measures 13.0 % [12.7, 13.3] "
+                   "relative RMSE (floor 2.3 %), mean ×1.046, against ≤ 5 % and within 3 %")
+def test_god_rays_meet_issue_32_targets(validation):
+    _, _, stages = validation
+    epi = method(stages, "window_room_god_rays", "epipolar")
+    assert epi["rel_rmse"] is None or epi["rel_rmse"] <= 0.05, epi
+    assert abs(epi["method_mean"] / epi["reference_mean"] - 1) <= 0.03, epi
