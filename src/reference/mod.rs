@@ -6,7 +6,6 @@
 pub mod beam_adjoint;
 pub mod grid_mc;
 pub mod hg_hp;
-/// Mitsuba 3 scene export: the independent reference renderer sees the imported `Scene` (issue 30).
 pub mod mitsuba;
 pub mod translucent;
 /// Brute-force volumetric path tracer: surface irradiance with volume-to-surface transport.
