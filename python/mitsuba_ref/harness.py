@@ -10,9 +10,11 @@ Request (JSON; paths relative to the request file):
          "max_depth": [-1]}]}
 A query may also carry `"minus_depth": k` (the estimate at max_depth k, from other seeds, is subtracted:
 light of exactly the orders between, e.g. max_depth [2] minus 1 = single scattering and single surface
-reflection without directly visible emitters) and `"methods": [{"name": ..., "values": [[r, g, b], ...]}]`
+reflection without directly visible emitters), or `"minus_export": "DIR"` (the same query on another
+export, e.g. the scene with its media's scattering turned into absorption, is subtracted) and `"methods": [{"name": ..., "values": [[r, g, b], ...]}]`
 (one RGB value per item, pixels row-major for images): each is compared with the reference by
-`compare.noise_corrected` into the result's `comparisons`.
+`compare.noise_corrected` into the result's `comparisons` (images with `"block": b` as means over b × b
+pixel blocks, so that a noisy reference still resolves the error at that scale).
 Result (`out`): per query and max_depth, `mean` (per item, RGB) and `var_of_mean` (the variance of the
 mean over the runs, i.e. sample variance / runs), the run count, the seconds spent; images also as EXR
 files beside `out` (`<stem>_<name>_d<max_depth>_mean.exr` and `..._var.exr`). Every file is written to a
@@ -285,10 +287,23 @@ def _write_exr(mi, path, array):
     os.replace(tmp, path)
 
 
-def _comparison(method, mean, var):
-    """One method's values against the reference (mean, variance of the mean), or why not."""
+def _blocks(values, height, width, b):
+    """Means over b × b pixel blocks (the image cropped to whole blocks), as (n, 3)."""
+    a = np.asarray(values, float).reshape(height, width, 3)
+    h, w = height // b * b, width // b * b
+    return a[:h, :w].reshape(h // b, b, w // b, b, 3).mean(axis=(1, 3)).reshape(-1, 3)
+
+
+def _comparison(method, mean, var, block=1, query=None):
+    """One method's values against the reference (mean, variance of the mean), or why not; images with
+    `block` > 1 are compared as means over block × block pixels (the variance of a block mean is the
+    mean variance / b², the pixels' estimates being independent)."""
     try:
-        c = _compare.noise_corrected(method["values"], np.asarray(mean).reshape(-1, 3), np.asarray(var).reshape(-1, 3))
+        a, r, vr = method["values"], np.asarray(mean).reshape(-1, 3), np.asarray(var).reshape(-1, 3)
+        if block and block > 1:
+            h, w = int(query["height"]), int(query["width"])
+            a, r, vr = _blocks(a, h, w, block), _blocks(r, h, w, block), _blocks(vr, h, w, block) / block**2
+        c = _compare.noise_corrected(a, r, vr)
     except (KeyError, ValueError) as e:
         return {"method": method.get("name"), "error": str(e)}
     c["method"] = method.get("name")
@@ -311,28 +326,33 @@ def run_request(request, base="."):
     for q in request["queries"]:
         kind, name = q.get("kind"), q.get("name", q.get("kind"))
         minus = q.get("minus_depth")
+        other = Reference(root / q["minus_export"], request.get("variant", "auto")) if q.get("minus_export") else None
         for depth in q.get("max_depth", [-1]):
             t0 = time.perf_counter()
             entry = {"name": name, "kind": kind, "max_depth": depth, "runs": runs}
 
-            def evaluate(d, s):
+            def evaluate(d, s, r=ref):
                 if kind == "irradiance":
-                    return ref.irradiance(q["points"], q["normals"], q.get("spp", 256), d, runs, s, rr)
+                    return r.irradiance(q["points"], q["normals"], q.get("spp", 256), d, runs, s, rr)
                 if kind == "radiance":
-                    return ref.radiance(q["origins"], q["directions"], q.get("spp", 64), d, runs, s, rr)
+                    return r.radiance(q["origins"], q["directions"], q.get("spp", 64), d, runs, s, rr)
                 if kind == "image":
-                    return ref.image(q.get("spp", 16), d, runs, s, q.get("width"), q.get("height"), rr)
+                    return r.image(q.get("spp", 16), d, runs, s, q.get("width"), q.get("height"), rr)
                 raise RequestError(f'query "{name}": unknown kind "{kind}" (image, irradiance or radiance)')
 
             m, v = evaluate(depth, seed)
-            if minus is not None:
-                # Light of exactly the orders in (minus_depth, max_depth]: the difference of two
-                # independent estimates (other seeds), so their variances add.
-                m1, v1 = evaluate(int(minus), seed + 7919)
+            if minus is not None or other is not None:
+                # Light of exactly the orders in (minus_depth, max_depth], or the light the other export
+                # lacks: the difference of two independent estimates (other seeds), so their variances add.
+                m1, v1 = evaluate(int(minus) if minus is not None else depth, seed + 7919, other or ref)
                 m, v = np.asarray(m) - np.asarray(m1), np.asarray(v) + np.asarray(v1)
-                entry["minus_depth"] = int(minus)
+                if minus is not None:
+                    entry["minus_depth"] = int(minus)
+                if other is not None:
+                    entry["minus_export"] = q["minus_export"]
             if q.get("methods"):
-                entry["comparisons"] = [_comparison(meth, m, v) for meth in q["methods"]]
+                block = int(q.get("block", 1))
+                entry["comparisons"] = [_comparison(meth, m, v, kind == "image" and block, q) for meth in q["methods"]]
             if kind == "image":
                 stem = f"{out.stem}_{name}_d{depth}"
                 _write_exr(ref.mi, out.parent / f"{stem}_mean.exr", m)
