@@ -558,20 +558,30 @@ fn validate(
     for s in p.stages().iter().filter(|s| only.is_empty() || only.iter().any(|id| id == s.id())) {
         let dir = out.join(s.id());
         eprintln!("validate   {:<20} {}", s.id(), s.def().kind());
-        let r = match cases::prepare(s.id(), s.def(), &ctx, quality, &dir.join("stage"))? {
-            cases::Prepared::Case(case) => validation::judge(&case, &dir, &harness)?,
-            cases::Prepared::NotCompared(why) => validation::not_compared(s.id(), s.def().kind(), &why),
+        let rows = match cases::prepare(s.id(), s.def(), &ctx, quality, &dir, &harness)? {
+            cases::Prepared::Cases(cases) => {
+                let many = cases.len() > 1;
+                let mut rows = Vec::new();
+                for case in &cases {
+                    let sub = if many { dir.join(case.stage.rsplit('/').next().unwrap_or("")) } else { dir.clone() };
+                    rows.push(validation::judge(case, &sub, &harness)?);
+                }
+                rows
+            }
+            cases::Prepared::NotCompared(why) => vec![validation::not_compared(s.id(), s.def().kind(), &why)],
         };
-        for m in &r.methods {
-            println!(
-                "validate   {:<20} {:<10} {} ({:.0} ms; Mitsuba {:.0} s)",
-                r.stage, m.name, m.text, m.ms, r.reference_s
-            );
+        for r in rows {
+            for m in &r.methods {
+                println!(
+                    "validate   {:<20} {:<10} {} ({:.0} ms; Mitsuba {:.0} s)",
+                    r.stage, m.name, m.text, m.ms, r.reference_s
+                );
+            }
+            if let Some(why) = &r.not_compared {
+                println!("validate   {:<20} not compared: {why}", r.stage);
+            }
+            results.push(r);
         }
-        if let Some(why) = &r.not_compared {
-            println!("validate   {:<20} not compared: {why}", r.stage);
-        }
-        results.push(r);
     }
     let v = Validation { pipeline: pipeline.to_path_buf(), quality, stages: results };
     let files = validation::write(&v, out)?;

@@ -2,7 +2,7 @@
 //! shares none of voltab's code or simplifications (issue 30).
 //!
 //! **Input → output.** A validated pipeline with its tables compiled, a [`Quality`] and the stages to
-//! check → per stage a [`Case`] ([`cases`]: what the stage computes, evaluated by the stage's own code at
+//! check → per stage one or more [`Case`]s ([`cases`]: what the stage computes, evaluated by the stage's own code at
 //! points or pixels the reference can evaluate too, and the scene as the reference must see it for that
 //! quantity) → the scene exported for Mitsuba ([`crate::reference::mitsuba`]) and a request for the
 //! Python harness (`python/mitsuba_ref`, which renders the same quantity from independent runs and
@@ -63,6 +63,10 @@ pub enum Query {
         /// Subtract the image at this max_depth (light of exactly the orders between).
         #[serde(skip_serializing_if = "Option::is_none")]
         minus_depth: Option<i32>,
+        /// Compare means over blocks of this many pixels square (a noisy reference resolves the error at
+        /// that scale).
+        #[serde(skip_serializing_if = "Option::is_none")]
+        block: Option<u32>,
     },
 }
 
@@ -88,6 +92,8 @@ pub struct Case {
     pub quantity: String,
     /// The scene as the reference must see it for that quantity.
     pub scene: crate::scene::Scene,
+    /// A second scene whose image is subtracted from the first's (same query, independent seeds).
+    pub minus_scene: Option<crate::scene::Scene>,
     /// Export options (camera, raster).
     pub export: crate::reference::mitsuba::ExportOptions,
     /// What the reference evaluates.
@@ -200,8 +206,15 @@ pub fn judge(case: &Case, dir: &Path, harness: &python::Harness) -> Result<Stage
     crate::reference::mitsuba::export(&case.scene, &case.export, &export_dir)
         .map_err(|source| ValidateError::Export { stage: case.stage.clone(), source })?;
     let runs = 4;
+    if let Some(minus) = &case.minus_scene {
+        crate::reference::mitsuba::export(minus, &case.export, &dir.join("mitsuba_minus"))
+            .map_err(|source| ValidateError::Export { stage: case.stage.clone(), source })?;
+    }
     let mut query = serde_json::to_value(&case.query).expect("the query serialises");
-    query["name"] = case.stage.clone().into();
+    if case.minus_scene.is_some() {
+        query["minus_export"] = "mitsuba_minus".into();
+    }
+    query["name"] = slug(&case.stage).into();
     query["methods"] = case.methods.iter().map(|m| serde_json::json!({"name": m.name, "values": m.values})).collect();
     let request = serde_json::json!({
         "export": "mitsuba", "out": "reference.json", "variant": "auto", "runs": runs, "seed": 0,
@@ -214,7 +227,10 @@ pub fn judge(case: &Case, dir: &Path, harness: &python::Harness) -> Result<Stage
     })?;
     let (spp, items) = match &case.query {
         Query::Irradiance { spp, points, .. } => (*spp, points.len()),
-        Query::Image { spp, width, height, .. } => (*spp, (*width * *height) as usize),
+        Query::Image { spp, width, height, block, .. } => {
+            let b = block.unwrap_or(1).max(1);
+            (*spp, ((*width / b) * (*height / b)) as usize)
+        }
     };
     let mut methods = Vec::new();
     for m in &case.methods {

@@ -314,6 +314,24 @@ impl ImageFogStage {
     }
 
     /// The scene (camera, fog) with colour and distance buffers read from another renderer's EXR files.
+    /// `voltab validate`: the effect applied to a colour image from another renderer (at its size), on
+    /// voltab's distance buffer of the stage's camera at that size. Returns the output and the fog's
+    /// time \[ms\] (integrals, MIP chain, filter; the distance buffer excluded).
+    pub fn apply_to_colour(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+        colour: &crate::render::RgbImage,
+    ) -> Result<(image_fog::FogOutput, f64), StageError> {
+        let mut fields = self.fields();
+        fields.colour_samples = 1;
+        let v = fields.load(id, ctx, Some((colour.width, colour.height)))?;
+        let medium = Self::medium(id, &v.scene)?;
+        let t0 = Instant::now();
+        let out = image_fog::render(&v.gbuffer.camera, colour, &v.gbuffer.distance, &medium, &self.options());
+        Ok((out, ms(t0)))
+    }
+
     fn load_exr(&self, id: &str, ctx: &StageContext) -> Result<View, StageError> {
         let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
         let t0 = Instant::now();
