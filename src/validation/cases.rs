@@ -118,11 +118,7 @@ fn god_rays(
     scratch: &Path,
 ) -> Result<Case, ValidateError> {
     let fail = |message: String| StageError::Input { stage: id.into(), message, help: "fix the stage's scene".into() };
-    let (width, height) = raster(stage.width, stage.height, quality, 160);
-    let spp = match quality {
-        Quality::Quick => 1024,
-        Quality::Full => 4096,
-    };
+    let (width, height, spp) = view(stage.width, stage.height, quality, 160, 1024);
     let mut small = stage.clone();
     small.width = width;
     small.height = height;
@@ -138,26 +134,15 @@ fn god_rays(
     let img = crate::image_io::read_exr_rgb(&exr).map_err(|e| fail(e.to_string()))?;
     let inscatter = img.rgb(Some("inscatter")).ok_or_else(|| fail(format!("{}: no inscatter layer", exr.display())))?;
     // The epipolar method's own time (shadow map and G-buffer excluded, as the stage reports it).
-    let summary: serde_json::Value =
-        std::fs::read(dir.join("summary.json")).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default();
+    let summary = read_summary(&dir);
     let ms = summary["phases_ms"][6].as_f64().unwrap_or(wall_ms);
 
-    let mut scene = Scene::load(&stage.scene_path(ctx.base_dir)).map_err(|e| fail(e.to_string()))?;
-    let camera = scene
-        .cameras
-        .get(stage.camera as usize)
-        .map(|c| c.name.clone())
-        .ok_or_else(|| fail(format!("camera {} does not exist", stage.camera)))?;
+    let (mut scene, camera) = scene_and_camera(id, &stage.scene_path(ctx.base_dir), stage.camera)?;
     let mut caveats = single_scattering_view(&mut scene).map_err(fail)?;
     if !stage.light_texture.is_empty() {
         caveats.push("the light texture (cookie) is not exported: the reference's light is white".into());
     }
-    if quality == Quality::Quick && (width, height) != (stage.width, stage.height) {
-        caveats.push(format!(
-            "the stage runs at {width}×{height} here (declared {}×{}) so the reference stays quick",
-            stage.width, stage.height
-        ));
-    }
+    caveats.extend(size_caveat((width, height), (stage.width, stage.height)));
     Ok(Case {
         stage: id.into(),
         kind: "EpipolarShadows",
@@ -214,6 +199,13 @@ fn single_scattering_view(scene: &mut Scene) -> Result<Vec<String>, String> {
     Ok(caveats)
 }
 
+/// Raster and reference paths per pixel of an image stage at `quality`: quick keeps at most `quick_width`
+/// pixels across (same aspect) and `quick_spp` paths per run; full, the declared raster and 4× the paths.
+fn view(width: u32, height: u32, quality: Quality, quick_width: u32, quick_spp: u32) -> (u32, u32, u32) {
+    let (w, h) = raster(width, height, quality, quick_width);
+    (w, h, if quality == Quality::Quick { quick_spp } else { 4 * quick_spp })
+}
+
 /// The raster of an image stage at `quality`: quick keeps at most `quick_width` pixels across (same aspect).
 fn raster(width: u32, height: u32, quality: Quality, quick_width: u32) -> (u32, u32) {
     match quality {
@@ -242,12 +234,7 @@ fn image_fog(
         Quality::Quick => (1024, 256),
         Quality::Full => (4096, 1024),
     };
-    let scene = Scene::load(&stage.scene_path(ctx.base_dir)).map_err(|e| fail(e.to_string()))?;
-    let camera = scene
-        .cameras
-        .get(stage.camera as usize)
-        .map(|c| c.name.clone())
-        .ok_or_else(|| fail(format!("camera {} does not exist", stage.camera)))?;
+    let (scene, camera) = scene_and_camera(id, &stage.scene_path(ctx.base_dir), stage.camera)?;
     let export = ExportOptions { camera: Some(camera), width, height: Some(height), spp, texels: 0 };
     // Mitsuba's vacuum image: the colour buffer the effect filters.
     let mut vacuum = scene.clone();
@@ -276,12 +263,7 @@ fn image_fog(
         "the effect filters Mitsuba's vacuum image ({vacuum_spp}×4 paths per pixel; its own noise is not \
          subtracted) on voltab's distance buffer"
     )];
-    if quality == Quality::Quick && (width, height) != (stage.width, stage.height) {
-        caveats.push(format!(
-            "the stage runs at {width}×{height} here (declared {}×{}) so the reference stays quick",
-            stage.width, stage.height
-        ));
-    }
+    caveats.extend(size_caveat((width, height), (stage.width, stage.height)));
     Ok(Case {
         stage: id.into(),
         kind: "ImageFog",
@@ -310,11 +292,7 @@ fn pop_render(
     if !stage.density_raw.is_empty() || !stage.density_slices.is_empty() {
         return Ok(None);
     }
-    let (width, height) = raster(stage.width, stage.height, quality, 160);
-    let spp = match quality {
-        Quality::Quick => 1024,
-        Quality::Full => 4096,
-    };
+    let (width, height, spp) = view(stage.width, stage.height, quality, 160, 1024);
     let mut small = stage.clone();
     small.width = width;
     small.height = height;
@@ -330,8 +308,7 @@ fn pop_render(
     let img = crate::image_io::read_exr_rgb(&exr).map_err(|e| fail(e.to_string()))?;
     let scattered = img.rgb(Some("scattered")).ok_or_else(|| fail(format!("{}: no scattered layer", exr.display())))?;
     // The frame's time: every light's grid, propagation phases and merge, and the ray marching.
-    let summary: serde_json::Value =
-        std::fs::read(dir.join("summary.json")).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default();
+    let summary = read_summary(&dir);
     let f = |v: &serde_json::Value| v.as_f64().unwrap_or(0.0);
     let lights_ms: f64 = summary["lights"].as_array().map_or(0.0, |ls| {
         ls.iter()
@@ -348,12 +325,7 @@ fn pop_render(
     });
     let ms = lights_ms + f(&summary["ray_march_ms"]);
 
-    let mut scene = Scene::load(&stage.scene_path(ctx.base_dir)).map_err(|e| fail(e.to_string()))?;
-    let camera = scene
-        .cameras
-        .get(stage.camera as usize)
-        .map(|c| c.name.clone())
-        .ok_or_else(|| fail(format!("camera {} does not exist", stage.camera)))?;
+    let (mut scene, camera) = scene_and_camera(id, &stage.scene_path(ctx.base_dir), stage.camera)?;
     // Surfaces black on both sides: otherwise Mitsuba's difference would also hold the surfaces lit by
     // the medium's scattered light, which is not light the medium scatters toward the camera.
     let mut caveats = vec![
@@ -379,12 +351,7 @@ fn pop_render(
         m.sigma_a = [0, 1, 2].map(|c| m.sigma_a[c] + m.sigma_s[c]);
         m.sigma_s = [0.0; 3];
     }
-    if quality == Quality::Quick && (width, height) != (stage.width, stage.height) {
-        caveats.push(format!(
-            "the stage runs at {width}×{height} here (declared {}×{}) so the reference stays quick",
-            stage.width, stage.height
-        ));
-    }
+    caveats.extend(size_caveat((width, height), (stage.width, stage.height)));
     Ok(Some(Case {
         stage: id.into(),
         kind: "PopRender",
@@ -448,11 +415,7 @@ fn translucent(
 ) -> Result<Vec<Case>, ValidateError> {
     use crate::scene::LightKind;
     let fail = |message: String| StageError::Input { stage: id.into(), message, help: "fix the stage's scene".into() };
-    let (width, height) = raster(stage.width, stage.height, quality, 48);
-    let spp = match quality {
-        Quality::Quick => 2048,
-        Quality::Full => 8192,
-    };
+    let (width, height, spp) = view(stage.width, stage.height, quality, 48, 2048);
     let mut small = stage.clone();
     small.width = width;
     small.height = height;
@@ -464,14 +427,8 @@ fn translucent(
     let sctx = StageContext { out_dir: scratch, ..*ctx };
     small.run(id, &sctx)?;
     let dir = scratch.join(id);
-    let summary: serde_json::Value =
-        std::fs::read(dir.join("summary.json")).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default();
-    let mut scene = Scene::load(&stage.scene_path(ctx.base_dir)).map_err(|e| fail(e.to_string()))?;
-    let camera = scene
-        .cameras
-        .get(stage.camera as usize)
-        .map(|c| c.name.clone())
-        .ok_or_else(|| fail(format!("camera {} does not exist", stage.camera)))?;
+    let summary = read_summary(&dir);
+    let (mut scene, camera) = scene_and_camera(id, &stage.scene_path(ctx.base_dir), stage.camera)?;
     let r = stage.light_radius;
     for l in &mut scene.lights {
         if let LightKind::Point { position } = l.kind {
@@ -489,12 +446,7 @@ fn translucent(
     if let Some(skipped) = summary["skipped_lights"].as_array().filter(|a| !a.is_empty()) {
         caveats.push(format!("lights the stage leaves out are in the reference: {skipped:?}"));
     }
-    if quality == Quality::Quick && (width, height) != (stage.width, stage.height) {
-        caveats.push(format!(
-            "the stage runs at {width}×{height} here (declared {}×{}) so the reference stays quick",
-            stage.width, stage.height
-        ));
-    }
+    caveats.extend(size_caveat((width, height), (stage.width, stage.height)));
     let mut cases = Vec::new();
     for (k, name) in stage.materials.iter().enumerate() {
         let m = &summary["materials"][k];
@@ -527,4 +479,31 @@ fn translucent(
         });
     }
     Ok(cases)
+}
+
+/// The stage's summary.json in `dir` (`null` when missing: the fields read from it fall back).
+fn read_summary(dir: &Path) -> serde_json::Value {
+    std::fs::read(dir.join("summary.json")).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default()
+}
+
+/// The stage's scene and the name of its camera (the export's sensor).
+fn scene_and_camera(id: &str, path: &Path, camera: u32) -> Result<(Scene, String), StageError> {
+    let fail = |message: String| StageError::Input { stage: id.into(), message, help: "fix the stage's scene".into() };
+    let scene = Scene::load(path).map_err(|e| fail(e.to_string()))?;
+    let name = scene
+        .cameras
+        .get(camera as usize)
+        .map(|c| c.name.clone())
+        .ok_or_else(|| fail(format!("{}: camera {camera} does not exist", path.display())))?;
+    Ok((scene, name))
+}
+
+/// Said when the stage runs smaller here than it is declared.
+fn size_caveat(here: (u32, u32), declared: (u32, u32)) -> Option<String> {
+    (here != declared).then(|| {
+        format!(
+            "the stage runs at {}×{} here (declared {}×{}) so the reference stays quick",
+            here.0, here.1, declared.0, declared.1
+        )
+    })
 }
