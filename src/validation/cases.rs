@@ -20,11 +20,13 @@
 //!   that scattered in the medium at least once.
 //! - `TranslucentRender` (wang2018): per material, the full image against Mitsuba's image of the scene
 //!   with that material's medium inside the object's dielectric boundary (all transport); point lights
-//!   become the stage's spheres of `light_radius` with the same intensity, on both sides.
+//!   become the stage's spheres of `light_radius` with the same intensity, on both sides. The stage's own
+//!   path tracer (`reference_samples`) is judged on the same pixels.
 //! - `EpipolarShadows` (baran2010): the in-scattered radiance image (single scattering of the one light
 //!   the stage uses, shadowed by the scene) against Mitsuba's image of the same camera with every surface
 //!   black and only that light, max_depth 2 minus max_depth 1: exactly the light that scattered once in
-//!   the medium, attenuated on both legs.
+//!   the medium, attenuated on both legs. The stage's own BVH marcher (`reference_steps`) is judged on
+//!   the same pixels.
 
 use std::path::Path;
 use std::time::Instant;
@@ -122,7 +124,9 @@ fn god_rays(
     let mut small = stage.clone();
     small.width = width;
     small.height = height;
-    small.reference_steps = 0;
+    // The stage's own reference (its BVH marcher) runs too, so Mitsuba judges it as well (issue 30:
+    // a simplification the method and its internal reference share shows up here).
+    small.reference_steps = stage.reference_steps;
     small.output = String::new();
     scratch_with_tables(id, ctx, scratch, &[])?;
     let sctx = StageContext { out_dir: scratch, ..*ctx };
@@ -138,6 +142,18 @@ fn god_rays(
     let ms = summary["phases_ms"][6].as_f64().unwrap_or(wall_ms);
 
     let (mut scene, camera) = scene_and_camera(id, &stage.scene_path(ctx.base_dir), stage.camera)?;
+    let mut methods =
+        vec![Method { name: "epipolar".into(), values: inscatter.iter().map(|p| p.map(f64::from)).collect(), ms }];
+    if stage.reference_steps > 0 {
+        let exr = dir.join("marcher.exr");
+        let img = crate::image_io::read_exr_rgb(&exr).map_err(|e| fail(e.to_string()))?;
+        let values = img.rgb(None).ok_or_else(|| fail(format!("{}: no R, G, B", exr.display())))?;
+        methods.push(Method {
+            name: format!("internal reference ({}-step BVH marcher)", stage.reference_steps),
+            values: values.iter().map(|p| p.map(f64::from)).collect(),
+            ms: summary["reference"]["ms"].as_f64().unwrap_or(0.0),
+        });
+    }
     let mut caveats = single_scattering_view(&mut scene).map_err(fail)?;
     if !stage.light_texture.is_empty() {
         caveats.push("the light texture (cookie) is not exported: the reference's light is white".into());
@@ -151,11 +167,7 @@ fn god_rays(
         minus_scene: None,
         export: ExportOptions { camera: Some(camera), width, height: Some(height), spp, texels: 0 },
         query: Query::Image { width, height, spp, max_depth: vec![2], minus_depth: Some(1), block: None },
-        methods: vec![Method {
-            name: "epipolar".into(),
-            values: inscatter.iter().map(|p| p.map(f64::from)).collect(),
-            ms,
-        }],
+        methods,
         caveats,
     })
 }
@@ -419,7 +431,9 @@ fn translucent(
     let mut small = stage.clone();
     small.width = width;
     small.height = height;
-    small.reference_samples = 0;
+    // The stage's own path tracer runs too (at the same raster), so Mitsuba judges it as well.
+    small.reference_samples = stage.reference_samples;
+    small.reference_width = width;
     small.output = String::new();
     let mut tables = vec![stage.table.clone()];
     tables.extend(stage.lobe_tables.iter().cloned());
@@ -443,6 +457,12 @@ fn translucent(
         .position(|m| matches!(m.boundary, crate::scene::Boundary::Mesh(_)))
         .ok_or_else(|| fail("the scene has no medium bounded by a mesh".into()))?;
     let mut caveats = Vec::new();
+    if stage.reference_samples > 0 {
+        caveats.push(format!(
+            "the internal path tracer's own noise ({} paths per pixel) is not subtracted: its error is an upper bound",
+            stage.reference_samples
+        ));
+    }
     if let Some(skipped) = summary["skipped_lights"].as_array().filter(|a| !a.is_empty()) {
         caveats.push(format!("lights the stage leaves out are in the reference: {skipped:?}"));
     }
@@ -456,6 +476,18 @@ fn translucent(
         let exr = dir.join(format!("{name}.exr"));
         let img = crate::image_io::read_exr_rgb(&exr).map_err(|e| fail(e.to_string()))?;
         let values = img.rgb(None).ok_or_else(|| fail(format!("{}: no R, G, B", exr.display())))?;
+        let mut methods =
+            vec![Method { name: "point-based".into(), values: values.iter().map(|p| p.map(f64::from)).collect(), ms }];
+        if stage.reference_samples > 0 {
+            let exr = dir.join(format!("{name}_reference.exr"));
+            let img = crate::image_io::read_exr_rgb(&exr).map_err(|e| fail(e.to_string()))?;
+            let values = img.rgb(None).ok_or_else(|| fail(format!("{}: no R, G, B", exr.display())))?;
+            methods.push(Method {
+                name: format!("internal reference (path tracer, {} paths)", stage.reference_samples),
+                values: values.iter().map(|p| p.map(f64::from)).collect(),
+                ms: m["comparison"]["reference_ms"].as_f64().unwrap_or(0.0),
+            });
+        }
         let mut sc = scene.clone();
         let med = &mut sc.media[object];
         med.sigma_s = [0, 1, 2].map(|c| sigma_t[c] * albedo[c]);
@@ -470,11 +502,7 @@ fn translucent(
             minus_scene: None,
             export: ExportOptions { camera: Some(camera.clone()), width, height: Some(height), spp, texels: 0 },
             query: Query::Image { width, height, spp, max_depth: vec![-1], minus_depth: None, block: Some(4) },
-            methods: vec![Method {
-                name: "point-based".into(),
-                values: values.iter().map(|p| p.map(f64::from)).collect(),
-                ms,
-            }],
+            methods,
             caveats: caveats.clone(),
         });
     }

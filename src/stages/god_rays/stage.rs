@@ -10,7 +10,7 @@
 //! unrectification) → composite `colour·T + in-scatter` → `<out>/<stage>/godrays.exr` (layers
 //! `inscatter`, `transmittance`, `colour`) with PNG previews, and `summary.json` (time per phase; with
 //! `reference_steps > 0` the relative RMSE of the in-scatter against the BVH shadow-ray marcher with that
-//! many steps per ray and both methods' times).
+//! many steps per ray and both methods' times; the marcher's in-scatter is written as `marcher.exr`).
 
 use std::path::Path;
 use std::time::Instant;
@@ -238,12 +238,17 @@ impl EpipolarShadows {
                 self.reference_steps as usize,
             );
             let ref_ms = ms(t0);
-            GodRaysCheck {
-                steps: self.reference_steps,
-                ms: ref_ms,
-                rel_rmse: crate::render::rel_rmse(&out.inscatter, &truth),
-                speedup: ref_ms / out.stats.total_ms.max(1e-9),
-            }
+            (truth, ref_ms)
+        });
+        if let Some((truth, _)) = &reference {
+            // The marcher's image beside the method's, for comparisons elsewhere (`voltab validate`).
+            outputs.extend(view::write_image(id, &dir, "marcher", truth, &[])?);
+        }
+        let reference = reference.map(|(truth, ref_ms)| GodRaysCheck {
+            steps: self.reference_steps,
+            ms: ref_ms,
+            rel_rmse: crate::render::rel_rmse(&out.inscatter, &truth),
+            speedup: ref_ms / out.stats.total_ms.max(1e-9),
         });
         let s: &EpipolarStats = &out.stats;
         let n = out.inscatter.data.len().max(1) as f64;
