@@ -182,10 +182,20 @@ pub fn build_table(t: &ValidatedTable, progress: &(dyn Fn(u64) + Sync)) -> Resul
     let check_ms = t_check.elapsed().as_secs_f64() * 1e3;
     // Progress: generation reports its own units; checking and encoding count as much again each.
     progress(t.def().work_units());
-    let t1 = Instant::now();
-    let enc = encode_table(t, &generated).map_err(|source| CompileError::Encode { id: t.id().into(), source })?;
-    let encode_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let (bytes, mut sidecar) = encode_with_sidecar(t, &generated)?;
     progress(t.def().work_units());
+    sidecar.generate_ms = generate_ms;
+    sidecar.check_ms = check_ms;
+    Ok((bytes, sidecar))
+}
+
+/// A generated and judged table encoded: the bytes and the sidecar (`generate_ms` and `check_ms` left 0
+/// for the caller). A sharded compile's merge runs this on a table assembled from its units, so its
+/// bytes are those of [`build_table`].
+pub fn encode_with_sidecar(t: &ValidatedTable, generated: &Generated) -> Result<(Vec<u8>, Sidecar), CompileError> {
+    let t1 = Instant::now();
+    let enc = encode_table(t, generated).map_err(|source| CompileError::Encode { id: t.id().into(), source })?;
+    let encode_ms = t1.elapsed().as_secs_f64() * 1e3;
     let s = &enc.stats;
     let sidecar = Sidecar {
         id: t.id().into(),
@@ -197,10 +207,10 @@ pub fn build_table(t: &ValidatedTable, progress: &(dyn Fn(u64) + Sync)) -> Resul
         file_bytes: enc.bytes.len() as u64,
         compression_ratio: s.ratio(),
         arrays: s.per_array.iter().map(|a| (a.name.clone(), a.raw_bytes, a.stored_bytes)).collect(),
-        generate_ms,
+        generate_ms: 0.0,
         encode_ms,
-        check_ms,
-        stats: generated.stats,
+        check_ms: 0.0,
+        stats: generated.stats.clone(),
     };
     Ok((enc.bytes, sidecar))
 }

@@ -66,6 +66,54 @@ enum Command {
         /// Compile only the tables and slices these scenes need (glTF or USD; see `voltab plan`).
         #[arg(long, num_args = 1..)]
         scene: Vec<PathBuf>,
+        /// Compute only shard I of N (`I/N`, 0-based) of the compile's work units into the shard folder
+        /// --out; `auto` reads SLURM_ARRAY_TASK_ID (count: VOLTAB_SHARD_COUNT or SLURM_ARRAY_TASK_COUNT)
+        /// or JOB_COMPLETION_INDEX (`auto/N`). `voltab merge` assembles the shards.
+        #[arg(long)]
+        shard: Option<String>,
+    },
+    /// Merge the shard folders of a sharded compile into an output folder: the same bytes as
+    /// `voltab compile` on one machine.
+    Merge {
+        /// Shard folders (every shard of the job, once).
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+        /// Output folder.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// The pipeline (default: the one the shards' manifest names).
+        #[arg(long)]
+        pipeline: Option<PathBuf>,
+        /// Print the summary as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write a Slurm job array that compiles a pipeline in N shards and a merge job that depends on it;
+    /// with --submit, submit both (only the shards not yet finished) and print the job ids.
+    Slurm {
+        /// Pipeline file.
+        pipeline: PathBuf,
+        /// Number of shards (array tasks).
+        #[arg(long)]
+        shards: u32,
+        /// Slurm partition.
+        #[arg(long)]
+        partition: Option<String>,
+        /// Time limit per task (Slurm's format, e.g. 1:00:00).
+        #[arg(long)]
+        time: Option<String>,
+        /// CPUs per task.
+        #[arg(long)]
+        cpus_per_task: Option<u32>,
+        /// Output folder on storage every node sees (shards in <out>/shards, scripts in <out>/slurm).
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// Plan for these scenes (see `voltab plan`).
+        #[arg(long, num_args = 1..)]
+        scene: Vec<PathBuf>,
+        /// Submit with sbatch and print the job ids.
+        #[arg(long)]
+        submit: bool,
     },
     /// Print what voltab imported from a glTF or USD scene: counts, bounds, lights in voltab's units,
     /// media, cameras, materials and warnings.
@@ -650,7 +698,79 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 );
             }
         }
-        Command::Compile { pipeline, out, only, jobs, json, scene } => {
+        Command::Compile { pipeline, out, jobs, json, scene, shard: Some(shard), only } => {
+            if !only.is_empty() {
+                anyhow::bail!(
+                    "--only and --shard cannot be combined\n  = help: a sharded compile covers the whole pipeline; drop --only"
+                );
+            }
+            let spec = voltab::shard::ShardSpec::parse(&shard, &|k| std::env::var(k).ok())?;
+            let p = planned(load(&pipeline)?, &scene, true)?;
+            let s = voltab::shard::compile_shard(&p, &scene, spec, &out, jobs, progress)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&s)?);
+            } else {
+                println!(
+                    "shard {}: {} of {} units computed, {} reused from an earlier attempt, in {:.0} ms → {}",
+                    s.shard,
+                    s.computed.len(),
+                    s.units_total,
+                    s.reused.len(),
+                    s.total_ms,
+                    s.dir.display()
+                );
+            }
+        }
+        Command::Merge { shards, out, pipeline, json } => {
+            let first = voltab::shard::read_manifest(&shards[0])?;
+            let path = pipeline.unwrap_or_else(|| first.pipeline.clone());
+            let p = planned(load(&path)?, &first.scenes, true)?;
+            let s = voltab::shard::merge(&p, &shards, &out)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&s)?);
+            } else {
+                for t in &s.tables {
+                    println!("{}", summary_line(t));
+                }
+                println!(
+                    "{} tables from {} shards (checked in {:.0} ms, published in {:.0} ms) → {}",
+                    s.tables.len(),
+                    s.shards,
+                    s.check_ms,
+                    s.publish_ms,
+                    out.display()
+                );
+            }
+        }
+        Command::Slurm { pipeline, shards, partition, time, cpus_per_task, out, scene, submit } => {
+            let p = planned(load(&pipeline)?, &scene, true)?;
+            let exe = std::env::current_exe()?;
+            let opts =
+                voltab::shard::slurm::SlurmOptions { shards, partition, time, out, scenes: scene, cpus_per_task };
+            let job = voltab::shard::slurm::write_and_submit(&p, &exe, &opts, submit)?;
+            println!("wrote {} and {}", job.array_script.display(), job.merge_script.display());
+            if submit {
+                match &job.array_job {
+                    Some(id) => println!(
+                        "submitted array job {id} ({} of {shards} shards pending: {:?})",
+                        job.pending.len(),
+                        job.pending
+                    ),
+                    None => println!("all {shards} shards are finished: only the merge is submitted"),
+                }
+                if let Some(id) = &job.merge_job {
+                    println!("submitted merge job {id}");
+                }
+            } else {
+                println!(
+                    "submit with: jid=$(sbatch --parsable --array=0-{} {}) && sbatch --dependency=afterok:$jid {}",
+                    shards.saturating_sub(1),
+                    job.array_script.display(),
+                    job.merge_script.display()
+                );
+            }
+        }
+        Command::Compile { pipeline, out, only, jobs, json, scene, shard: None } => {
             let p = planned(load(&pipeline)?, &scene, json)?;
             let summary = compile(&p, &CompileOptions { out_dir: out.clone(), only, jobs, progress })?;
             if json {

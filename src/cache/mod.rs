@@ -133,8 +133,29 @@ impl OutputDir {
     }
 
     /// True if `<out>/<id>.vtab` holds `key`, verifies completely, and has its sidecar.
+    ///
+    /// A file verified once is not read again while its fingerprint — size, inode, modification and
+    /// status-change times (any write or re-link changes the last) — matches the one recorded at that
+    /// verification and its header still carries `key`; a fingerprint taken within
+    /// [`RACY_NS`] of the file's last change is not trusted (a write in the same clock tick could go
+    /// unseen), as build systems do. `voltab verify` always reads every chunk.
     pub fn is_up_to_date(&self, id: &str, key: &[u8; 32]) -> bool {
-        self.sidecar_path(id).is_file() && file_holds(&self.table_path(id), key)
+        if !self.sidecar_path(id).is_file() {
+            return false;
+        }
+        let path = self.table_path(id);
+        let fp_path = self.cached(key, "fp");
+        if let (Some(now), Some(stored)) = (Fingerprint::of(&path), Fingerprint::read(&fp_path))
+            && stored.trusted_for(&now)
+        {
+            return VtabReader::open(&path).is_ok_and(|r| r.header().content_key == *key);
+        }
+        let ok = file_holds(&path, key);
+        if ok && let Some(mut fp) = Fingerprint::of(&path) {
+            fp.verified_ns = now_ns();
+            let _ = write_atomic(&fp_path, fp.to_line().as_bytes());
+        }
+        ok
     }
 
     /// If the cache holds a verified table for `key`, makes it `<out>/<id>.vtab` (with its sidecar)
@@ -171,6 +192,84 @@ impl OutputDir {
         fs::rename(&tmp, dst).map_err(io)?;
         sync_dir(&self.dir);
         Ok(())
+    }
+}
+
+/// A fingerprint younger than this after the file's last change is not trusted \[ns\].
+pub const RACY_NS: u128 = 2_000_000_000;
+
+fn now_ns() -> u128 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos())
+}
+
+/// What `is_up_to_date` remembers of a verified file (one line in `.voltab-cache/<key>.fp`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Fingerprint {
+    len: u64,
+    ino: u64,
+    dev: u64,
+    mtime_ns: u128,
+    ctime_ns: u128,
+    /// When the file was verified completely.
+    verified_ns: u128,
+}
+
+impl Fingerprint {
+    #[cfg(unix)]
+    fn of(path: &Path) -> Option<Self> {
+        use std::os::unix::fs::MetadataExt;
+        let m = fs::metadata(path).ok()?;
+        if !m.is_file() {
+            return None;
+        }
+        let ns = |s: i64, n: i64| u128::try_from(i128::from(s) * 1_000_000_000 + i128::from(n)).ok();
+        Some(Self {
+            len: m.len(),
+            ino: m.ino(),
+            dev: m.dev(),
+            mtime_ns: ns(m.mtime(), m.mtime_nsec())?,
+            ctime_ns: ns(m.ctime(), m.ctime_nsec())?,
+            verified_ns: 0,
+        })
+    }
+
+    #[cfg(not(unix))]
+    fn of(_path: &Path) -> Option<Self> {
+        None
+    }
+
+    fn to_line(self) -> String {
+        format!(
+            "voltab-fp 1 {} {} {} {} {} {}\n",
+            self.len, self.ino, self.dev, self.mtime_ns, self.ctime_ns, self.verified_ns
+        )
+    }
+
+    fn read(path: &Path) -> Option<Self> {
+        let bytes = bounded::read_regular(path, 4096).ok()?;
+        let text = std::str::from_utf8(&bytes).ok()?;
+        let f: Vec<&str> = text.split_whitespace().collect();
+        if f.len() != 8 || f[0] != "voltab-fp" || f[1] != "1" {
+            return None;
+        }
+        Some(Self {
+            len: f[2].parse().ok()?,
+            ino: f[3].parse().ok()?,
+            dev: f[4].parse().ok()?,
+            mtime_ns: f[5].parse().ok()?,
+            ctime_ns: f[6].parse().ok()?,
+            verified_ns: f[7].parse().ok()?,
+        })
+    }
+
+    /// The file is the one verified, and the verification came clearly after its last change.
+    fn trusted_for(&self, now: &Fingerprint) -> bool {
+        self.len == now.len
+            && self.ino == now.ino
+            && self.dev == now.dev
+            && self.mtime_ns == now.mtime_ns
+            && self.ctime_ns == now.ctime_ns
+            && self.verified_ns > self.mtime_ns.max(self.ctime_ns).saturating_add(RACY_NS)
     }
 }
 

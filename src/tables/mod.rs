@@ -284,6 +284,101 @@ impl TableDef {
     }
 }
 
+/// A work unit's result before assembly (see [`TableDef::units`]): what a shard of a sharded compile
+/// hands to the merge.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum UnitPart {
+    /// One g slice of an `MsLobes` table.
+    MsLobesSlice(ms_lobes::SlicePart),
+    /// The references of an `MsLobes` table's sidecar check.
+    MsLobesCheck(Vec<ms_lobes::CheckReference>),
+    /// One (emitter, g slice) of a `ZhResponse` table.
+    Zh(zh_response::ZhPart),
+}
+
+impl UnitPart {
+    /// A unit of references for the sidecar check (its time is check time, not generation time).
+    pub fn is_check(&self) -> bool {
+        matches!(self, UnitPart::MsLobesCheck(_) | UnitPart::Zh(zh_response::ZhPart::Check(_)))
+    }
+}
+
+/// What the merge of a split table's units gives: the table and its error estimates.
+#[derive(Debug, Clone)]
+pub struct Assembled {
+    /// The table, as [`TableDef::generate`] makes it.
+    pub generated: Generated,
+    /// Wall time of [`TableDef::estimate_errors`] on it \[ms\] (its references came from a unit).
+    pub check_ms: f64,
+}
+
+impl TableDef {
+    /// How many independent work units the generator splits into, for a sharded compile
+    /// (`crate::shard`): for an `MsLobes` table its g slices (each its own random stream) and the
+    /// references of its check; 1 for the other kinds (the whole table is one unit: they take seconds,
+    /// not hours).
+    pub fn units(&self) -> usize {
+        match self {
+            TableDef::MsLobes(p) => p.g_values().len() + 1,
+            TableDef::ZhResponse(p) => p.unit_count() + 1,
+            _ => 1,
+        }
+    }
+
+    /// Computes work unit `unit` of a table with more than one ([`TableDef::units`]).
+    pub fn generate_unit(
+        &self,
+        key: &[u8; 32],
+        unit: usize,
+        progress: Progress<'_>,
+    ) -> Result<UnitPart, GenerateError> {
+        match self {
+            TableDef::MsLobes(p) if unit == p.g_values().len() => {
+                p.check_references(key).map(UnitPart::MsLobesCheck).map_err(GenerateError::Layout)
+            }
+            TableDef::MsLobes(p) => p.generate_slice(unit, key, progress).map(UnitPart::MsLobesSlice),
+            TableDef::ZhResponse(p) => p.shard_unit(unit, key, progress).map(UnitPart::Zh),
+            _ => Err(GenerateError::Layout(format!("a {} table is one work unit: generate it whole", self.kind()))),
+        }
+    }
+
+    /// The table and its error estimates from all its work units, in unit order: the same bits as
+    /// [`TableDef::generate`] followed by [`TableDef::estimate_errors`].
+    pub fn assemble(&self, key: &[u8; 32], parts: Vec<UnitPart>) -> Result<Assembled, GenerateError> {
+        match self {
+            TableDef::MsLobes(p) => {
+                let (mut slices, mut refs) = (Vec::new(), Vec::new());
+                for part in parts {
+                    match part {
+                        UnitPart::MsLobesSlice(s) => slices.push(s),
+                        UnitPart::MsLobesCheck(r) => refs.extend(r),
+                        UnitPart::Zh(_) => return Err(GenerateError::Layout("a ZH unit given to a lobe table".into())),
+                    }
+                }
+                let mut generated = p.assemble(slices)?;
+                let t0 = std::time::Instant::now();
+                generated.stats = p.estimate_errors_with(&generated, key, &refs).map_err(GenerateError::Layout)?;
+                Ok(Assembled { generated, check_ms: t0.elapsed().as_secs_f64() * 1e3 })
+            }
+            TableDef::ZhResponse(p) => {
+                let (mut zh, mut refs) = (Vec::new(), Vec::new());
+                for part in parts {
+                    match part {
+                        UnitPart::Zh(zh_response::ZhPart::Check(r)) => refs.extend(r),
+                        UnitPart::Zh(z) => zh.push(z),
+                        _ => return Err(GenerateError::Layout("a lobe unit given to a ZH table".into())),
+                    }
+                }
+                let mut generated = p.assemble(zh)?;
+                let t0 = std::time::Instant::now();
+                generated.stats = p.estimate_errors_with(&generated, key, &refs).map_err(GenerateError::Layout)?;
+                Ok(Assembled { generated, check_ms: t0.elapsed().as_secs_f64() * 1e3 })
+            }
+            _ => Err(GenerateError::Layout(format!("a {} table is one work unit: generate it whole", self.kind()))),
+        }
+    }
+}
+
 impl TableDef {
     /// Measures a generated table against the kind's independent reference.
     pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {

@@ -100,7 +100,7 @@ const FOUR_PI: f64 = 4.0 * PI;
 pub const MAX_NODES_PER_PANEL: usize = 64;
 
 /// Which light the response is for (see the module doc for the geometry).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum EmitterKind {
     /// Isotropic point source of intensity 1 W/sr at distance `d` along `+z`, infinite medium.
     Point,
@@ -134,7 +134,7 @@ impl ResponseConfig {
 }
 
 /// Tabulated response.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Response {
     /// The emitter the table is for.
     pub kind: EmitterKind,

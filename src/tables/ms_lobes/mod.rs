@@ -379,38 +379,75 @@ impl MsLobes {
     /// Runs the generator: one walk per g slice (parallel over photon batches; integer tallies make the
     /// bytes independent of the thread count).
     pub fn generate(&self, key: &[u8; 32], progress: Progress<'_>) -> Result<Generated, GenerateError> {
+        let parts = (0..self.g_values().len())
+            .map(|gi| self.generate_slice(gi, key, progress))
+            .collect::<Result<Vec<_>, _>>()?;
+        self.assemble(parts)
+    }
+
+    /// The walk of g slice `gi` alone: the work unit of a sharded compile (`crate::shard`). Its random
+    /// stream is keyed by the slice ([`MsLobes::slice_stream`]), so a slice computed on another machine is
+    /// the same to the bit.
+    pub fn generate_slice(
+        &self,
+        gi: usize,
+        key: &[u8; 32],
+        progress: Progress<'_>,
+    ) -> Result<SlicePart, GenerateError> {
+        let gs = self.g_values();
+        let Some(&g) = gs.get(gi) else {
+            return Err(GenerateError::Layout(format!("g slice {gi} out of range (the table has {})", gs.len())));
+        };
+        let (rho_axis, z_axis) = (self.rho_axis(), self.z_axis());
+        let mut cfg = self.lobe_config(gi, g, key);
+        cfg.stream = self.slice_stream(g);
+        let r = lobe_transport::compute(&cfg, progress)
+            .map_err(|m| GenerateError::Layout(format!("lobe walk for g = {g}: {m}")))?;
+        // Share of the density the closure contributes, at REMAINDER_POINTS, for the largest albedo node.
+        let mut remainder_share = vec![0.0f64; REMAINDER_POINTS.len()];
+        if let (Some(rem), Some(dens)) = (r.remainder_density.last(), r.density.last()) {
+            for (share, &(rho, z)) in remainder_share.iter_mut().zip(&REMAINDER_POINTS) {
+                if let (Some(ir), Some(iz)) = (rho_axis.cell(rho), z_axis.cell(z)) {
+                    let c = iz * rho_axis.bins + ir;
+                    if dens[c] > 0.0 {
+                        *share = share.max(rem[c] / dens[c]);
+                    }
+                }
+            }
+        }
+        Ok(SlicePart {
+            total: r.total.into_iter().flatten().collect(),
+            density: r.density.into_iter().flatten().collect(),
+            double: r.double,
+            inside: r.inside,
+            remainder_share,
+            events: r.events,
+            dropped: r.nonfinite_discarded,
+        })
+    }
+
+    /// The table from its g slices, in slice order (what [`MsLobes::generate`] does after the walks).
+    pub fn assemble(&self, parts: Vec<SlicePart>) -> Result<Generated, GenerateError> {
         let descs = self.descs();
         let gs = self.g_values();
+        if parts.len() != gs.len() {
+            return Err(GenerateError::Layout(format!("{} g slices given for a table of {}", parts.len(), gs.len())));
+        }
         let help = "a lobe value overflowed the element type; use element: F64";
         let mut values = Vec::with_capacity(descs.len());
         let (mut double, mut inside) = (Vec::new(), Vec::new());
         let (mut events, mut dropped) = (0u64, 0u64);
-        // Share of the density the closure contributes, at REMAINDER_POINTS, for the largest albedo node.
         let mut remainder_share = vec![0.0f64; REMAINDER_POINTS.len()];
-        let (rho_axis, z_axis) = (self.rho_axis(), self.z_axis());
-        for (gi, &g) in gs.iter().enumerate() {
-            let mut cfg = self.lobe_config(gi, g, key);
-            cfg.stream = self.slice_stream(g);
-            let r = lobe_transport::compute(&cfg, progress)
-                .map_err(|m| GenerateError::Layout(format!("lobe walk for g = {g}: {m}")))?;
-            events += r.events;
-            dropped += r.nonfinite_discarded;
-            if let (Some(rem), Some(dens)) = (r.remainder_density.last(), r.density.last()) {
-                for (share, &(rho, z)) in remainder_share.iter_mut().zip(&REMAINDER_POINTS) {
-                    if let (Some(ir), Some(iz)) = (rho_axis.cell(rho), z_axis.cell(z)) {
-                        let c = iz * rho_axis.bins + ir;
-                        if dens[c] > 0.0 {
-                            *share = share.max(rem[c] / dens[c]);
-                        }
-                    }
-                }
+        for (gi, part) in parts.into_iter().enumerate() {
+            events += part.events;
+            dropped += part.dropped;
+            for (share, s) in remainder_share.iter_mut().zip(&part.remainder_share) {
+                *share = share.max(*s);
             }
-            let total: Vec<f64> = r.total.into_iter().flatten().collect();
-            let density: Vec<f64> = r.density.into_iter().flatten().collect();
-            values.push(to_element(&descs[2 * gi], total, help)?);
-            values.push(to_element(&descs[2 * gi + 1], density, help)?);
-            double.extend(r.double);
-            inside.extend(r.inside);
+            values.push(to_element(&descs[2 * gi], part.total, help)?);
+            values.push(to_element(&descs[2 * gi + 1], part.density, help)?);
+            double.extend(part.double);
+            inside.extend(part.inside);
         }
         values.push(to_element(&descs[2 * gs.len()], double, help)?);
         values.push(to_element(&descs[2 * gs.len() + 1], inside, help)?);
@@ -632,9 +669,48 @@ impl MsLobes {
     /// backward walk of [`crate::reference::beam_adjoint`] at [`PROBES`], for the first and last g slices;
     /// conservation at the largest albedo node ≤ 0.5; the closure's share (from the generator).
     pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
+        self.estimate_errors_with(generated, key, &[])
+    }
+
+    /// The backward-walk references [`MsLobes::estimate_errors`] compares the table with, computed in
+    /// parallel: a work unit of its own in a sharded compile (it needs the definition only, not the
+    /// table). Each value is keyed by the bits of its (ρ, z, θ, g, α).
+    pub fn check_references(&self, key: &[u8; 32]) -> Result<Vec<CheckReference>, String> {
+        use rayon::prelude::*;
+        let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
+        let albedo = probe_albedo(self);
+        let theta = std::f64::consts::FRAC_PI_2;
+        let points: Vec<[f64; 5]> = probe_gs(self)
+            .into_iter()
+            .filter(|g| g.abs() <= 0.7)
+            .flat_map(|g| probes(self).into_iter().map(move |(rho, z)| [rho, z, theta, g, albedo]))
+            .collect();
+        let reference = adjoint(SIDECAR_ADJOINT_SAMPLES, seed, 400);
+        points
+            .par_iter()
+            .map(|q| Ok(CheckReference { at: q.map(f64::to_bits), value: reference(q[0], q[1], q[2], q[3], q[4])? }))
+            .collect()
+    }
+
+    /// [`MsLobes::estimate_errors`] with references already computed ([`MsLobes::check_references`]);
+    /// any it lacks are computed here. The same numbers either way.
+    pub fn estimate_errors_with(
+        &self,
+        generated: &Generated,
+        key: &[u8; 32],
+        known: &[CheckReference],
+    ) -> Result<GenStats, String> {
         let table = MsLobesTable::from_arrays(self, &generated.arrays, &generated.values)?;
         let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
-        let c = compare(self, &table, &adjoint(SIDECAR_ADJOINT_SAMPLES, seed, 400))?;
+        let compute = adjoint(SIDECAR_ADJOINT_SAMPLES, seed, 400);
+        let reference = |rho: f64, z: f64, theta: f64, g: f64, albedo: f64| {
+            let at = [rho, z, theta, g, albedo].map(f64::to_bits);
+            match known.iter().find(|r| r.at == at) {
+                Some(r) => Ok(r.value),
+                None => compute(rho, z, theta, g, albedo),
+            }
+        };
+        let c = compare(self, &table, &reference)?;
         let where_ =
             format!("(rho, z) in {:?} mfp, g {:?}, albedo node {}", probes(self), probe_gs(self), probe_albedo(self));
         let mut errors = vec![
@@ -834,4 +910,33 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
         }
     }
     v
+}
+
+/// One g slice of an [`MsLobes`] table before assembly: the work unit a sharded compile moves between
+/// machines (bincode; f64 values travel bit for bit).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SlicePart {
+    /// Lobes of all orders >= 2 per albedo node, flat `[albedo, z, rho, theta(, phi)]`.
+    pub total: Vec<f64>,
+    /// Densities per albedo node, flat `[albedo, z, rho]`.
+    pub density: Vec<f64>,
+    /// E_2 without albedo², flat `[z, rho, theta(, phi)]`.
+    pub double: Vec<f64>,
+    /// Per-order inside fractions.
+    pub inside: Vec<f64>,
+    /// Closure share at the report points (largest albedo node).
+    pub remainder_share: Vec<f64>,
+    /// Scattering events simulated.
+    pub events: u64,
+    /// Non-finite contributions discarded.
+    pub dropped: u64,
+}
+
+/// One backward-walk reference value of the sidecar check ([`MsLobes::check_references`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CheckReference {
+    /// Bits of (ρ, z, θ, g, α).
+    pub at: [u64; 5],
+    /// (mean, standard error).
+    pub value: (f64, f64),
 }

@@ -404,6 +404,61 @@ impl ZhResponse {
     /// [`zh_transport::compute_with_progress`] (parallel over distances, collected in order: the bytes
     /// do not depend on the thread count).
     pub fn generate(&self, _key: &[u8; 32], progress: Progress<'_>) -> Result<Generated, GenerateError> {
+        let parts = (0..self.unit_count()).map(|u| self.generate_unit(u, progress)).collect::<Result<Vec<_>, _>>()?;
+        self.assemble(parts)
+    }
+
+    /// Work units of a sharded compile (`crate::shard`): one per (emitter, g slice), emitter-major.
+    pub fn unit_count(&self) -> usize {
+        self.emitters.len() * self.g.values().len()
+    }
+
+    /// [`ZhResponse::generate_unit`] and, as unit [`ZhResponse::unit_count`], the check's references.
+    pub fn shard_unit(&self, unit: usize, key: &[u8; 32], progress: Progress<'_>) -> Result<ZhPart, GenerateError> {
+        if unit == self.unit_count() {
+            return self.check_references(key).map(ZhPart::Check).map_err(GenerateError::Layout);
+        }
+        self.generate_unit(unit, progress)
+    }
+
+    /// The transport of one (emitter, g slice) ([`ZhResponse::unit_count`]): deterministic quadrature,
+    /// the same bits wherever it runs.
+    pub fn generate_unit(&self, unit: usize, progress: Progress<'_>) -> Result<ZhPart, GenerateError> {
+        let gs = self.g.values();
+        let (Some(e), Some(&g)) = (self.emitters.get(unit / gs.len().max(1)), gs.get(unit % gs.len().max(1))) else {
+            return Err(GenerateError::Layout(format!("work unit {unit} out of range ({})", self.unit_count())));
+        };
+        match e.transport() {
+            Some(kind) => zh_transport::compute_with_progress(kind, &self.transport_config(g), &|| progress(1))
+                .map(ZhPart::Response)
+                .map_err(|m| GenerateError::Layout(format!("{} transport for g = {g}: {m}", e.prefix()))),
+            None => {
+                let r = zh_transport::area::compute(&self.area_config(g))
+                    .map_err(|m| GenerateError::Layout(format!("area transport for g = {g}: {m}")))?;
+                progress(self.units_of(EmitterProfile::Area));
+                let (mut zh, mut axis) = (Vec::new(), Vec::new());
+                for rows in &r.bounces {
+                    for row in rows {
+                        for entry in row {
+                            zh.extend_from_slice(&entry.zh);
+                            axis.push(entry.theta_fit);
+                        }
+                    }
+                }
+                Ok(ZhPart::Area { direct: r.direct.iter().flatten().copied().collect(), zh, axis })
+            }
+        }
+    }
+
+    /// The table from its units in unit order: what [`ZhResponse::generate`] does after the transport.
+    pub fn assemble(&self, parts: Vec<ZhPart>) -> Result<Generated, GenerateError> {
+        if parts.len() != self.unit_count() {
+            return Err(GenerateError::Layout(format!(
+                "{} units given for a table of {}",
+                parts.len(),
+                self.unit_count()
+            )));
+        }
         let descs = self.descs();
         let gs = self.g.values();
         let help = "a ZH coefficient overflowed the element type; use element: F64";
@@ -411,19 +466,42 @@ impl ZhResponse {
         let mut discarded = 0u64;
         let mut tail_energy = Vec::new();
         let mut at = 0;
+        let mut parts = parts.into_iter();
         for e in &self.emitters {
+            let mine: Vec<ZhPart> = parts.by_ref().take(gs.len()).collect();
             let Some(kind) = e.transport() else {
-                let (vals, bad) = self.generate_area(&gs, &descs[at..at + 3], progress, help)?;
-                values.extend(vals);
-                discarded += bad;
+                let (mut direct, mut zh, mut axis) = (Vec::new(), Vec::new(), Vec::new());
+                for part in mine {
+                    let ZhPart::Area { direct: d, zh: z, axis: a } = part else {
+                        return Err(GenerateError::Layout("an area emitter's unit holds a point response".into()));
+                    };
+                    direct.extend(d);
+                    zh.extend(z);
+                    axis.extend(a);
+                }
+                for v in [&mut direct, &mut zh, &mut axis] {
+                    for x in v.iter_mut().filter(|x| !x.is_finite()) {
+                        *x = 0.0;
+                        discarded += 1;
+                    }
+                }
+                values.push(to_element(&descs[at], direct, help)?);
+                values.push(to_element(&descs[at + 1], zh, help)?);
+                values.push(to_element(&descs[at + 2], axis, help)?);
                 at += 3;
                 continue;
             };
             let mut per_g = Vec::with_capacity(gs.len());
-            for &g in &gs {
-                let r = zh_transport::compute_with_progress(kind, &self.transport_config(g), &|| progress(1))
-                    .map_err(|m| GenerateError::Layout(format!("{} transport for g = {g}: {m}", e.prefix())))?;
-                per_g.push(r);
+            for part in mine {
+                match part {
+                    ZhPart::Response(r) if r.kind == kind => per_g.push(r),
+                    _ => {
+                        return Err(GenerateError::Layout(format!(
+                            "a {} unit holds another emitter's response",
+                            e.prefix()
+                        )));
+                    }
+                }
             }
             let direct: Vec<f64> = per_g.iter().flat_map(|r| r.direct.iter().copied()).collect();
             let mut zh = Vec::new();
@@ -475,47 +553,6 @@ impl ZhResponse {
         let errors = tail_energy_estimates(&tail_energy);
         let stats = GenStats { nonfinite_discarded: discarded, samples: 0, errors };
         Ok(Generated { arrays: descs, values, stats })
-    }
-
-    /// The area emitter's three arrays (direct, zh, axis) over every g slice, and the count of non-finite
-    /// values replaced by 0.
-    fn generate_area(
-        &self,
-        gs: &[f64],
-        descs: &[ArrayDesc],
-        progress: Progress<'_>,
-        help: &str,
-    ) -> Result<(Vec<crate::container::ArrayValues>, u64), GenerateError> {
-        let (mut direct, mut zh, mut axis) = (Vec::new(), Vec::new(), Vec::new());
-        for &g in gs {
-            let r = zh_transport::area::compute(&self.area_config(g))
-                .map_err(|m| GenerateError::Layout(format!("area transport for g = {g}: {m}")))?;
-            progress(self.units_of(EmitterProfile::Area));
-            direct.extend(r.direct.iter().flatten().copied());
-            for rows in &r.bounces {
-                for row in rows {
-                    for entry in row {
-                        zh.extend_from_slice(&entry.zh);
-                        axis.push(entry.theta_fit);
-                    }
-                }
-            }
-        }
-        let mut bad = 0u64;
-        for v in [&mut direct, &mut zh, &mut axis] {
-            for x in v.iter_mut().filter(|x| !x.is_finite()) {
-                *x = 0.0;
-                bad += 1;
-            }
-        }
-        Ok((
-            vec![
-                to_element(&descs[0], direct, help)?,
-                to_element(&descs[1], zh, help)?,
-                to_element(&descs[2], axis, help)?,
-            ],
-            bad,
-        ))
     }
 }
 
@@ -642,6 +679,35 @@ impl ZhResponse {
     /// Error estimates against the walk (sidecar): single scattering and the sum of orders `≤ B` on a
     /// facing receiver at d ∈ {0.5, 2} mean free paths, per emitter, for up to three g slices.
     pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
+        self.estimate_errors_with(generated, key, &[])
+    }
+
+    /// The walk references [`ZhResponse::estimate_errors`] compares with, computed in parallel: a work
+    /// unit of a sharded compile (they need the definition only). Keyed by (emitter, g bits, d bits).
+    pub fn check_references(&self, key: &[u8; 32]) -> Result<Vec<WalkReference>, String> {
+        use rayon::prelude::*;
+        let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
+        let cases: Vec<(EmitterProfile, f64, f64)> = self
+            .emitters
+            .iter()
+            .flat_map(|&p| self.probe_gs().into_iter().flat_map(move |g| [0.5, 2.0].map(|d| (p, g, d))))
+            .collect();
+        cases
+            .par_iter()
+            .map(|&(profile, g, d)| {
+                let value = walk_reference(profile, g, d, self.bounces as usize, SIDECAR_WALK_PHOTONS, seed)?;
+                Ok(WalkReference { profile, g: g.to_bits(), d: d.to_bits(), value })
+            })
+            .collect()
+    }
+
+    /// [`ZhResponse::estimate_errors`] with walk references already computed; missing ones are computed.
+    pub fn estimate_errors_with(
+        &self,
+        generated: &Generated,
+        key: &[u8; 32],
+        known: &[WalkReference],
+    ) -> Result<GenStats, String> {
         let table = ZhResponseTable::from_arrays(self, &generated.arrays, &generated.values)?;
         let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
         let mut noise = 0.0f64;
@@ -655,7 +721,13 @@ impl ZhResponse {
             let (mut single, mut total) = (0.0f64, 0.0f64);
             for g in self.probe_gs() {
                 for d in [0.5, 2.0] {
-                    let reference = walk_reference(profile, g, d, self.bounces as usize, SIDECAR_WALK_PHOTONS, seed)?;
+                    let reference = match known
+                        .iter()
+                        .find(|r| r.profile == profile && r.g == g.to_bits() && r.d == f64::to_bits(d))
+                    {
+                        Some(r) => r.value.clone(),
+                        None => walk_reference(profile, g, d, self.bounces as usize, SIDECAR_WALK_PHOTONS, seed)?,
+                    };
                     photons += SIDECAR_WALK_PHOTONS;
                     let (s, t) = compare(&table, profile, g, d, &reference)?;
                     single = single.max(s);
@@ -825,4 +897,35 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
         ));
     }
     v
+}
+
+/// One (emitter, g slice) of a [`ZhResponse`] table before assembly: a work unit of a sharded compile.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum ZhPart {
+    /// A point or directional emitter's response.
+    Response(zh_transport::Response),
+    /// The walk references of the sidecar check ([`ZhResponse::check_references`]).
+    Check(Vec<WalkReference>),
+    /// An area emitter's flattened arrays for one g slice.
+    Area {
+        /// `direct[d, θ]`.
+        direct: Vec<f64>,
+        /// `zh[b, d, θ, l]`.
+        zh: Vec<f64>,
+        /// `axis[b, d, θ]`.
+        axis: Vec<f64>,
+    },
+}
+
+/// One walk reference of the ZH sidecar check: (direct, per-order means, per-order standard errors).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WalkReference {
+    /// Emitter.
+    pub profile: EmitterProfile,
+    /// Bits of g.
+    pub g: u64,
+    /// Bits of the distance.
+    pub d: u64,
+    /// What [`walk_reference`] returned.
+    pub value: (f64, Vec<f64>, Vec<f64>),
 }

@@ -1,0 +1,197 @@
+//! `voltab slurm`: a sharded compile as a Slurm job array plus a merge job that depends on it.
+//!
+//! Input: a pipeline, the shard count N, an output folder on storage every node sees, and optional
+//! partition / time limit. Output: `<out>/slurm/compile.sbatch` (an array `0..N-1`, each task
+//! `voltab compile --shard auto` into `<out>/shards/compile-<i>`), `<out>/slurm/merge.sbatch`
+//! (`voltab merge` of those folders into `<out>`), and with `submit` the two jobs submitted with
+//! `sbatch --parsable`, the merge held by `--dependency=afterok:<array job>`. A resubmission submits
+//! only the tasks whose shard folder has no finished manifest for this pipeline (a task killed
+//! mid-way reuses its finished units), so only missing work is redone.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use super::{MANIFEST, ShardError, ShardSpec, pipeline_key, read_manifest};
+use crate::pipeline::ValidatedPipeline;
+
+/// What to write.
+#[derive(Debug, Clone)]
+pub struct SlurmOptions {
+    /// Number of array tasks.
+    pub shards: u32,
+    /// `#SBATCH --partition`.
+    pub partition: Option<String>,
+    /// `#SBATCH --time`.
+    pub time: Option<String>,
+    /// The shared output folder.
+    pub out: PathBuf,
+    /// Scenes the pipeline is planned for (`--scene`).
+    pub scenes: Vec<PathBuf>,
+    /// CPUs per task (`#SBATCH --cpus-per-task`), if set.
+    pub cpus_per_task: Option<u32>,
+}
+
+/// The scripts written and, when submitted, the job ids.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SlurmJob {
+    /// The array script.
+    pub array_script: PathBuf,
+    /// The merge script.
+    pub merge_script: PathBuf,
+    /// Shard indices still to compute (all of them on a first submission).
+    pub pending: Vec<u32>,
+    /// Job id of the array (None when nothing was pending or not submitted).
+    pub array_job: Option<String>,
+    /// Job id of the merge.
+    pub merge_job: Option<String>,
+}
+
+fn quote(p: &Path) -> String {
+    let s = p.display().to_string();
+    format!("'{}'", s.replace('\'', r"'\''"))
+}
+
+fn absolute(p: &Path) -> PathBuf {
+    std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
+}
+
+/// The shard folder of task `i`.
+pub fn shard_dir(out: &Path, i: u32) -> PathBuf {
+    out.join("shards").join(format!("compile-{i}"))
+}
+
+/// Indices whose shard folder holds no finished manifest of this pipeline.
+pub fn pending_shards(p: &ValidatedPipeline, out: &Path, shards: u32) -> Vec<u32> {
+    let key = pipeline_key(p);
+    (0..shards)
+        .filter(|&i| {
+            let d = shard_dir(out, i);
+            !(d.join(MANIFEST).is_file()
+                && read_manifest(&d)
+                    .is_ok_and(|m| m.pipeline_key == key && m.shard == ShardSpec { index: i, count: shards }))
+        })
+        .collect()
+}
+
+/// Writes the two scripts (and the log folder) for `p`, and with `submit` submits them.
+pub fn write_and_submit(
+    p: &ValidatedPipeline,
+    voltab: &Path,
+    opts: &SlurmOptions,
+    submit: bool,
+) -> Result<SlurmJob, ShardError> {
+    let err = |message: String, help: &str| ShardError::Spec { message, help: help.into() };
+    if opts.shards == 0 || opts.shards > 1_000_000 {
+        return Err(err(format!("--shards {}", opts.shards), "use 1 … 1000000 shards"));
+    }
+    let out = absolute(&opts.out);
+    let dir = out.join("slurm");
+    let logs = dir.join("logs");
+    std::fs::create_dir_all(&logs).map_err(|e| {
+        err(format!("cannot create {}: {e}", logs.display()), "choose a writable --out on shared storage")
+    })?;
+    let voltab = absolute(voltab);
+    let pipeline = absolute(p.path());
+    let scenes: String = if opts.scenes.is_empty() {
+        String::new()
+    } else {
+        format!(" --scene {}", opts.scenes.iter().map(|s| quote(&absolute(s))).collect::<Vec<_>>().join(" "))
+    };
+    let mut head = String::new();
+    if let Some(part) = &opts.partition {
+        head.push_str(&format!("#SBATCH --partition={part}\n"));
+    }
+    if let Some(t) = &opts.time {
+        head.push_str(&format!("#SBATCH --time={t}\n"));
+    }
+    if let Some(c) = opts.cpus_per_task {
+        head.push_str(&format!("#SBATCH --cpus-per-task={c}\n"));
+    }
+    let n = opts.shards;
+    let array_script = dir.join("compile.sbatch");
+    let array = format!(
+        "#!/bin/bash\n\
+         # Written by `voltab slurm`: shard $SLURM_ARRAY_TASK_ID of {n} of compiling {pipeline}.\n\
+         # Submit with: sbatch --array=0-{last} {script}\n\
+         #SBATCH --job-name=voltab-compile\n\
+         #SBATCH --output={logs}/compile-%a.log\n\
+         {head}\
+         set -euo pipefail\n\
+         export VOLTAB_SHARD_COUNT={n}\n\
+         exec {voltab} compile {pipe}{scenes} --shard auto --out {out_q}/shards/compile-\"$SLURM_ARRAY_TASK_ID\"\n",
+        pipeline = pipeline.display(),
+        last = n - 1,
+        script = array_script.display(),
+        logs = logs.display(),
+        voltab = quote(&voltab),
+        pipe = quote(&pipeline),
+        out_q = quote(&out),
+    );
+    let merge_script = dir.join("merge.sbatch");
+    let shards: Vec<String> = (0..n).map(|i| quote(&shard_dir(&out, i))).collect();
+    let merge = format!(
+        "#!/bin/bash\n\
+         # Written by `voltab slurm`: merges the {n} shards into {out}.\n\
+         #SBATCH --job-name=voltab-merge\n\
+         #SBATCH --output={logs}/merge.log\n\
+         {head}\
+         set -euo pipefail\n\
+         exec {voltab} merge {shards} --out {out_q}\n",
+        out = out.display(),
+        logs = logs.display(),
+        voltab = quote(&voltab),
+        shards = shards.join(" "),
+        out_q = quote(&out),
+    );
+    let write = |path: &Path, text: &str| -> Result<(), ShardError> {
+        crate::cache::write_atomic(path, text.as_bytes())?;
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let _ = std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o755));
+        }
+        Ok(())
+    };
+    write(&array_script, &array)?;
+    write(&merge_script, &merge)?;
+    let pending = pending_shards(p, &out, n);
+    let mut job = SlurmJob { array_script, merge_script, pending: pending.clone(), array_job: None, merge_job: None };
+    if !submit {
+        return Ok(job);
+    }
+    let array_job = if pending.is_empty() {
+        None
+    } else {
+        let list = pending.iter().map(u32::to_string).collect::<Vec<_>>().join(",");
+        Some(sbatch(&[format!("--array={list}")], &job.array_script)?)
+    };
+    let dep: Vec<String> = array_job.iter().map(|id| format!("--dependency=afterok:{id}")).collect();
+    job.merge_job = Some(sbatch(&dep, &job.merge_script)?);
+    job.array_job = array_job;
+    Ok(job)
+}
+
+/// `sbatch --parsable ARGS SCRIPT` → the job id.
+fn sbatch(args: &[String], script: &Path) -> Result<String, ShardError> {
+    let output =
+        Command::new("sbatch").arg("--parsable").args(args).arg(script).output().map_err(|e| ShardError::Spec {
+            message: format!("cannot run sbatch: {e}"),
+            help: "run on a Slurm submit host (sbatch on PATH), or submit the scripts by hand".into(),
+        })?;
+    if !output.status.success() {
+        return Err(ShardError::Spec {
+            message: format!("sbatch {} failed: {}", script.display(), String::from_utf8_lossy(&output.stderr).trim()),
+            help: "check the partition and time limit (--partition, --time) and that slurmctld is up (sinfo)".into(),
+        });
+    }
+    let text = String::from_utf8_lossy(&output.stdout);
+    // --parsable prints "<id>" or "<id>;<cluster>".
+    let id = text.trim().split(';').next().unwrap_or("").to_string();
+    if id.is_empty() || !id.chars().all(|c| c.is_ascii_digit() || c == '_') {
+        return Err(ShardError::Spec {
+            message: format!("sbatch printed no job id: {text:?}"),
+            help: "check the Slurm installation (sbatch --parsable)".into(),
+        });
+    }
+    Ok(id)
+}
