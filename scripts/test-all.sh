@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every check CI runs: formatting, lints, the Rust test suite, docs, and the Python
 # interchange checks (in a venv it creates and fills from PyPI), and the GPU path against the CPU on
-# a software Vulkan adapter (lavapipe, installed from Debian's packages when missing).
+# a software Vulkan adapter (lavapipe, installed from Debian's packages when missing), and a sharded compile
+# on a one-node Slurm cluster on localhost (slurm-wlm and munge from Debian's packages when missing).
 # Usage: scripts/test-all.sh        (VOLTAB_GPU=0 scripts/test-all.sh: without the GPU feature and tests,
 #                                    for a machine that cannot install a Vulkan driver)
 set -euo pipefail
@@ -62,6 +63,10 @@ step "Python interchange checks"
 # test_validate.py runs `voltab validate --quality quick` with the release binary the run_report step built.
 VOLTAB_BIN="$(pwd)/target/debug/voltab" VOLTAB_RELEASE_BIN="$(pwd)/target/release/voltab" \
   .venv/bin/python -m pytest -q tests/python
+
+step "Slurm: a sharded compile on a one-node cluster on localhost, byte-identical to a local one (issue 38)"
+# Installs slurm-wlm and munge when missing, starts and stops its own daemons (scripts/slurm-local.sh).
+VOLTAB_BIN="$(pwd)/target/release/voltab" scripts/slurm-test.sh
 
 # Fuzz smoke run (issue 37): opt-in, since its instrumented release build of every dependency is
 # long on a shared machine. VOLTAB_FUZZ_SMOKE=60 runs each fuzz target for 60 s.

@@ -750,6 +750,9 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             let job = voltab::shard::slurm::write_and_submit(&p, &exe, &opts, submit)?;
             println!("wrote {} and {}", job.array_script.display(), job.merge_script.display());
             if submit {
+                if let Some(id) = &job.cancelled {
+                    println!("cancelled the pending merge job {id} of the earlier submission");
+                }
                 match &job.array_job {
                     Some(id) => println!(
                         "submitted array job {id} ({} of {shards} shards pending: {:?})",

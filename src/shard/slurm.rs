@@ -44,6 +44,8 @@ pub struct SlurmJob {
     pub array_job: Option<String>,
     /// Job id of the merge.
     pub merge_job: Option<String>,
+    /// A pending merge of an earlier submission, cancelled (its array had failed).
+    pub cancelled: Option<String>,
 }
 
 fn quote(p: &Path) -> String {
@@ -155,9 +157,32 @@ pub fn write_and_submit(
     write(&array_script, &array)?;
     write(&merge_script, &merge)?;
     let pending = pending_shards(p, &out, n);
-    let mut job = SlurmJob { array_script, merge_script, pending: pending.clone(), array_job: None, merge_job: None };
+    let mut job = SlurmJob {
+        array_script,
+        merge_script,
+        pending: pending.clone(),
+        array_job: None,
+        merge_job: None,
+        cancelled: None,
+    };
     if !submit {
         return Ok(job);
+    }
+    // A merge left from an earlier submission waits forever on its failed array (afterok can no longer
+    // be satisfied): cancel it while it is still pending, and submit a new one.
+    let jobid_file = dir.join("merge.jobid");
+    if let Ok(old) = std::fs::read_to_string(&jobid_file) {
+        let old = old.trim();
+        if !old.is_empty() && old.chars().all(|c| c.is_ascii_digit()) {
+            let pending = Command::new("squeue")
+                .args(["-h", "-t", "PENDING", "-o", "%i", "-j", old])
+                .output()
+                .is_ok_and(|o| o.status.success() && !String::from_utf8_lossy(&o.stdout).trim().is_empty());
+            if pending {
+                let _ = Command::new("scancel").arg(old).status();
+                job.cancelled = Some(old.to_string());
+            }
+        }
     }
     let array_job = if pending.is_empty() {
         None
@@ -166,7 +191,9 @@ pub fn write_and_submit(
         Some(sbatch(&[format!("--array={list}")], &job.array_script)?)
     };
     let dep: Vec<String> = array_job.iter().map(|id| format!("--dependency=afterok:{id}")).collect();
-    job.merge_job = Some(sbatch(&dep, &job.merge_script)?);
+    let merge_job = sbatch(&dep, &job.merge_script)?;
+    crate::cache::write_atomic(&jobid_file, merge_job.as_bytes())?;
+    job.merge_job = Some(merge_job);
     job.array_job = array_job;
     Ok(job)
 }
