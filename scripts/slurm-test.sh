@@ -54,7 +54,7 @@ killed=""
 for _ in $(seq 1 400); do
   running=$(squeue -h -j "$array" -t RUNNING -o %i 2>/dev/null | head -1)
   if [ -n "$running" ]; then
-    sleep 1
+    sleep 0.5
     if squeue -h -j "$running" -t RUNNING -o %i 2>/dev/null | grep -q .; then
       scancel --signal=KILL "$running"
       killed=$running

@@ -274,3 +274,29 @@ fn a_no_op_compile_trusts_a_fingerprint_but_never_a_changed_file() {
     assert_eq!(s.tables[0].status, Status::Compiled, "a corrupted table is never trusted");
     voltab::container::VtabReader::open(&t).unwrap().verify().unwrap();
 }
+
+#[test]
+fn a_slice_split_into_photon_batches_is_the_slice_walked_whole() {
+    // Two batches: UNIT_PHOTONS and a short remainder, merged from separate work units.
+    let photons = voltab::tables::ms_lobes::UNIT_PHOTONS + 3000;
+    let d = common::tempdir();
+    let f = common::write(
+        d.path(),
+        "lobes.ron",
+        &format!(
+            "(tables: [MsLobes(id: \"two_batches\", materials: [], g: [0.8], albedo_grid: 0, albedos: [0.5], \
+             rho_bins: 4, z_bins: 4, theta_bins: 3, direction_bins: 4, photons: {photons}, max_order: 16)])"
+        ),
+    );
+    let p = load_and_validate(&f, &Disk).unwrap();
+    let local = d.path().join("local");
+    compile(&p, &CompileOptions { out_dir: local.clone(), ..Default::default() }).unwrap();
+    let t = &p.tables()[0];
+    assert_eq!(t.def().units(), 3, "two photon batches and the check");
+    let dirs = shards(&p, d.path(), 3);
+    let units = voltab::shard::compile_units(&p);
+    assert_eq!(voltab::shard::assign(&units, 3).iter().collect::<std::collections::BTreeSet<_>>().len(), 3);
+    let out = d.path().join("merged");
+    merge(&p, &dirs, &out).unwrap();
+    assert_eq!(tables(&out), tables(&local));
+}

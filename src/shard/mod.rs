@@ -552,9 +552,8 @@ pub fn merge(p: &ValidatedPipeline, dirs: &[PathBuf], out_dir: &Path) -> Result<
             help: "rerun those shards' tasks (`--shard I/N`) and give their folders to the merge".into(),
         });
     }
-    // Every part read and checked before anything is published.
-    let mut payloads: Vec<Option<Payload>> = Vec::with_capacity(units.len());
-    for u in &units {
+    // Every part read and checked before anything is published (one at a time: parts can be large).
+    let read_part = |u: &Unit| -> Result<Payload, ShardError> {
         let (d, e) = have[u.name.as_str()];
         let bad = |message: String| ShardError::Shard {
             path: d.clone(),
@@ -569,7 +568,10 @@ pub fn merge(p: &ValidatedPipeline, dirs: &[PathBuf], out_dir: &Path) -> Result<
         if blake3::hash(&bytes).to_hex().as_str() != e.blake3 {
             return Err(bad("its blake3 does not match the manifest (corrupt)".into()));
         }
-        payloads.push(Some(decode_part(&bytes).map_err(bad)?));
+        decode_part(&bytes).map_err(bad)
+    };
+    for u in &units {
+        read_part(u)?;
     }
     let check_ms = t0.elapsed().as_secs_f64() * 1e3;
     let t1 = Instant::now();
@@ -585,20 +587,20 @@ pub fn merge(p: &ValidatedPipeline, dirs: &[PathBuf], out_dir: &Path) -> Result<
             let (vtab, sidecar) = if let [i] = idx[..]
                 && units[i].part.is_none()
             {
-                match payloads[i].take() {
-                    Some(Payload::Table { vtab, sidecar }) => (vtab, sidecar),
-                    _ => return Err(mismatch(t)),
+                match read_part(&units[i])? {
+                    Payload::Table { vtab, sidecar } => (vtab, sidecar),
+                    Payload::Unit { .. } => return Err(mismatch(t)),
                 }
             } else {
                 let mut parts = Vec::with_capacity(idx.len());
                 let (mut generate_ms, mut check_ms) = (0.0, 0.0);
                 for &i in &idx {
-                    match payloads[i].take() {
-                        Some(Payload::Unit { part, ms }) => {
+                    match read_part(&units[i])? {
+                        Payload::Unit { part, ms } => {
                             *(if part.is_check() { &mut check_ms } else { &mut generate_ms }) += ms;
-                            parts.push(part);
+                            UnitPart::absorb(&mut parts, part);
                         }
-                        _ => return Err(mismatch(t)),
+                        Payload::Table { .. } => return Err(mismatch(t)),
                     }
                 }
                 assemble_table(t, parts, generate_ms, check_ms)?

@@ -288,8 +288,13 @@ impl TableDef {
 /// hands to the merge.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum UnitPart {
-    /// One g slice of an `MsLobes` table.
-    MsLobesSlice(ms_lobes::SlicePart),
+    /// The integer tallies of one photon batch of one g slice of an `MsLobes` table.
+    MsLobesPhotons {
+        /// The g slice.
+        slice: usize,
+        /// Its tallies.
+        tally: crate::physics::lobe_transport::PhotonTally,
+    },
     /// The references of an `MsLobes` table's sidecar check.
     MsLobesCheck(Vec<ms_lobes::CheckReference>),
     /// One (emitter, g slice) of a `ZhResponse` table.
@@ -300,6 +305,20 @@ impl UnitPart {
     /// A unit of references for the sidecar check (its time is check time, not generation time).
     pub fn is_check(&self) -> bool {
         matches!(self, UnitPart::MsLobesCheck(_) | UnitPart::Zh(zh_response::ZhPart::Check(_)))
+    }
+
+    /// Adds `part` to the parts of one table gathered so far, summing the photon tallies of a slice as
+    /// they arrive (a merge then holds one tally per slice, not one per unit). Integer sums: the order
+    /// of arrival does not change a bit.
+    pub fn absorb(parts: &mut Vec<UnitPart>, part: UnitPart) {
+        if let UnitPart::MsLobesPhotons { slice, tally } = &part
+            && let Some(UnitPart::MsLobesPhotons { tally: into, .. }) =
+                parts.iter_mut().find(|p| matches!(p, UnitPart::MsLobesPhotons { slice: s, .. } if s == slice))
+        {
+            into.absorb(tally);
+            return;
+        }
+        parts.push(part);
     }
 }
 
@@ -319,7 +338,7 @@ impl TableDef {
     /// not hours).
     pub fn units(&self) -> usize {
         match self {
-            TableDef::MsLobes(p) => p.g_values().len() + 1,
+            TableDef::MsLobes(p) => p.g_values().len() * p.photon_units() + 1,
             TableDef::ZhResponse(p) => p.unit_count() + 1,
             _ => 1,
         }
@@ -333,10 +352,13 @@ impl TableDef {
         progress: Progress<'_>,
     ) -> Result<UnitPart, GenerateError> {
         match self {
-            TableDef::MsLobes(p) if unit == p.g_values().len() => {
+            TableDef::MsLobes(p) if unit == p.g_values().len() * p.photon_units() => {
                 p.check_references(key).map(UnitPart::MsLobesCheck).map_err(GenerateError::Layout)
             }
-            TableDef::MsLobes(p) => p.generate_slice(unit, key, progress).map(UnitPart::MsLobesSlice),
+            TableDef::MsLobes(p) => {
+                let (slice, batch) = (unit / p.photon_units(), unit % p.photon_units());
+                p.generate_batch(slice, batch, key, progress).map(|tally| UnitPart::MsLobesPhotons { slice, tally })
+            }
             TableDef::ZhResponse(p) => p.shard_unit(unit, key, progress).map(UnitPart::Zh),
             _ => Err(GenerateError::Layout(format!("a {} table is one work unit: generate it whole", self.kind()))),
         }
@@ -347,14 +369,20 @@ impl TableDef {
     pub fn assemble(&self, key: &[u8; 32], parts: Vec<UnitPart>) -> Result<Assembled, GenerateError> {
         match self {
             TableDef::MsLobes(p) => {
-                let (mut slices, mut refs) = (Vec::new(), Vec::new());
+                let n = p.g_values().len();
+                let (mut tallies, mut refs) = (vec![Vec::new(); n], Vec::new());
                 for part in parts {
                     match part {
-                        UnitPart::MsLobesSlice(s) => slices.push(s),
+                        UnitPart::MsLobesPhotons { slice, tally } if slice < n => tallies[slice].push(tally),
                         UnitPart::MsLobesCheck(r) => refs.extend(r),
-                        UnitPart::Zh(_) => return Err(GenerateError::Layout("a ZH unit given to a lobe table".into())),
+                        _ => return Err(GenerateError::Layout("a unit of another table given to a lobe table".into())),
                     }
                 }
+                let slices = tallies
+                    .iter()
+                    .enumerate()
+                    .map(|(gi, t)| p.slice_from_tallies(gi, key, t))
+                    .collect::<Result<Vec<_>, _>>()?;
                 let mut generated = p.assemble(slices)?;
                 let t0 = std::time::Instant::now();
                 generated.stats = p.estimate_errors_with(&generated, key, &refs).map_err(GenerateError::Layout)?;

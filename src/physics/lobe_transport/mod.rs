@@ -240,6 +240,7 @@ pub struct LobeResponse {
 pub const BATCH: u64 = 4096;
 
 /// Integer tallies of one worker.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 struct Tally {
     /// `[cell][bin][channel]`, channels = albedo nodes in descending order, then `E_2` ([`increments`]).
     hist: Vec<u64>,
@@ -250,7 +251,9 @@ struct Tally {
     /// Tally events not yet applied: `(cell · bins + bin) << ORDER_BITS | k`. Applying them in
     /// sorted order turns random writes into the histogram (the walk's bottleneck: one cache miss
     /// per collision) into a sequential sweep.
+    #[serde(skip)]
     pending: Vec<u64>,
+    #[serde(skip)]
     scratch: Vec<u64>,
 }
 
@@ -371,15 +374,30 @@ pub fn lobe_frame(p: [f64; 3]) -> ([f64; 3], [f64; 3], [f64; 3]) {
 /// Runs the walk for one g slice (parallel over batches of [`BATCH`] photons; `progress` is called
 /// with the number of photons of every finished batch).
 pub fn compute(cfg: &LobeConfig, progress: &(dyn Fn(u64) + Sync)) -> Result<LobeResponse, String> {
+    let t = tally(cfg, 0..cfg.photons, progress)?;
+    Ok(finish(cfg, &t.0))
+}
+
+/// The integer tallies of photons `range` of a g slice: a work unit of a sharded compile. Every photon
+/// draws from its own counter-based stream and tallies are integers, so the tallies of any partition
+/// of `0..photons`, summed ([`finish_tallies`]), are those of [`compute`] to the bit.
+pub fn tally(
+    cfg: &LobeConfig,
+    range: std::ops::Range<u64>,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<PhotonTally, String> {
     cfg.check()?;
+    if range.end > cfg.photons || range.start > range.end {
+        return Err(format!("photons {range:?} outside 0..{}", cfg.photons));
+    }
     let inc = increments(cfg);
-    let batches = cfg.photons.div_ceil(BATCH);
+    let batches = (range.end - range.start).div_ceil(BATCH);
     let next = AtomicU64::new(0);
     let workers = rayon::current_num_threads().max(1);
     let results = std::sync::Mutex::new(Vec::with_capacity(workers));
     rayon::scope(|s| {
         for _ in 0..workers {
-            let (next, inc, results) = (&next, &inc, &results);
+            let (next, inc, results, range) = (&next, &inc, &results, &range);
             s.spawn(move |_| {
                 let mut t = Tally::new(cfg);
                 loop {
@@ -387,14 +405,15 @@ pub fn compute(cfg: &LobeConfig, progress: &(dyn Fn(u64) + Sync)) -> Result<Lobe
                     if b >= batches {
                         break;
                     }
-                    let end = ((b + 1) * BATCH).min(cfg.photons);
-                    for photon in b * BATCH..end {
+                    let start = range.start + b * BATCH;
+                    let end = (start + BATCH).min(range.end);
+                    for photon in start..end {
                         walk(cfg, photon, &mut t);
                         if t.pending.len() + cfg.max_order > PENDING {
                             t.flush(inc, cfg.cells() * cfg.bins(), 1 + cfg.albedos.len());
                         }
                     }
-                    progress(end - b * BATCH);
+                    progress(end - start);
                 }
                 t.flush(inc, cfg.cells() * cfg.bins(), 1 + cfg.albedos.len());
                 // Integer tallies: the order in which workers hand them in does not matter.
@@ -412,8 +431,32 @@ pub fn compute(cfg: &LobeConfig, progress: &(dyn Fn(u64) + Sync)) -> Result<Lobe
     for t in &tallies {
         total.add(t);
     }
-    drop(tallies);
+    total.pending = Vec::new();
+    Ok(PhotonTally(total))
+}
+
+/// The lobes of a g slice from the tallies of a partition of its photons (any order).
+pub fn finish_tallies(cfg: &LobeConfig, parts: &[PhotonTally]) -> Result<LobeResponse, String> {
+    let mut total = Tally::new(cfg);
+    total.pending = Vec::new();
+    for p in parts {
+        if p.0.hist.len() != total.hist.len() || p.0.inside.len() != total.inside.len() {
+            return Err("photon tallies of another grid".into());
+        }
+        total.add(&p.0);
+    }
     Ok(finish(cfg, &total))
+}
+
+/// Integer tallies of a range of photons ([`tally`]); serialisable, so a shard can hand them over.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PhotonTally(Tally);
+
+impl PhotonTally {
+    /// Adds another range's tallies (integer sums: any order gives the same bits).
+    pub fn absorb(&mut self, other: &PhotonTally) {
+        self.0.add(&other.0);
+    }
 }
 
 /// One photon: `K` collisions in the non-absorbing medium, tallying orders `≥ 2` inside the grid.

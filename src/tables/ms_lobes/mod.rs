@@ -385,23 +385,66 @@ impl MsLobes {
         self.assemble(parts)
     }
 
-    /// The walk of g slice `gi` alone: the work unit of a sharded compile (`crate::shard`). Its random
-    /// stream is keyed by the slice ([`MsLobes::slice_stream`]), so a slice computed on another machine is
-    /// the same to the bit.
+    /// The walk of g slice `gi` alone. Its random stream is keyed by the slice
+    /// ([`MsLobes::slice_stream`]) and each photon has its own counter-based stream, so a slice — or a
+    /// range of its photons ([`MsLobes::generate_batch`]) — computed on another machine is the same to
+    /// the bit.
     pub fn generate_slice(
         &self,
         gi: usize,
         key: &[u8; 32],
         progress: Progress<'_>,
     ) -> Result<SlicePart, GenerateError> {
+        let (g, cfg) = self.slice_config(gi, key)?;
+        let t = lobe_transport::tally(&cfg, 0..cfg.photons, progress)
+            .map_err(|m| GenerateError::Layout(format!("lobe walk for g = {g}: {m}")))?;
+        self.slice_from_tallies(gi, key, &[t])
+    }
+
+    /// How many photon batches of [`UNIT_PHOTONS`] a slice's walk splits into (work units of a sharded
+    /// compile).
+    pub fn photon_units(&self) -> usize {
+        self.photons.div_ceil(UNIT_PHOTONS).max(1) as usize
+    }
+
+    /// The integer tallies of photon batch `batch` of g slice `gi`: a work unit of a sharded compile.
+    pub fn generate_batch(
+        &self,
+        gi: usize,
+        batch: usize,
+        key: &[u8; 32],
+        progress: Progress<'_>,
+    ) -> Result<lobe_transport::PhotonTally, GenerateError> {
+        let (g, cfg) = self.slice_config(gi, key)?;
+        let start = batch as u64 * UNIT_PHOTONS;
+        if start >= cfg.photons {
+            return Err(GenerateError::Layout(format!("photon batch {batch} out of range ({})", self.photon_units())));
+        }
+        let end = (start + UNIT_PHOTONS).min(cfg.photons);
+        lobe_transport::tally(&cfg, start..end, progress)
+            .map_err(|m| GenerateError::Layout(format!("lobe walk for g = {g}: {m}")))
+    }
+
+    fn slice_config(&self, gi: usize, key: &[u8; 32]) -> Result<(f64, LobeConfig), GenerateError> {
         let gs = self.g_values();
         let Some(&g) = gs.get(gi) else {
             return Err(GenerateError::Layout(format!("g slice {gi} out of range (the table has {})", gs.len())));
         };
-        let (rho_axis, z_axis) = (self.rho_axis(), self.z_axis());
         let mut cfg = self.lobe_config(gi, g, key);
         cfg.stream = self.slice_stream(g);
-        let r = lobe_transport::compute(&cfg, progress)
+        Ok((g, cfg))
+    }
+
+    /// Slice `gi` from the tallies of a partition of its photons (any order; integer sums).
+    pub fn slice_from_tallies(
+        &self,
+        gi: usize,
+        key: &[u8; 32],
+        tallies: &[lobe_transport::PhotonTally],
+    ) -> Result<SlicePart, GenerateError> {
+        let (g, cfg) = self.slice_config(gi, key)?;
+        let (rho_axis, z_axis) = (self.rho_axis(), self.z_axis());
+        let r = lobe_transport::finish_tallies(&cfg, tallies)
             .map_err(|m| GenerateError::Layout(format!("lobe walk for g = {g}: {m}")))?;
         // Share of the density the closure contributes, at REMAINDER_POINTS, for the largest albedo node.
         let mut remainder_share = vec![0.0f64; REMAINDER_POINTS.len()];
@@ -912,8 +955,11 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
     v
 }
 
-/// One g slice of an [`MsLobes`] table before assembly: the work unit a sharded compile moves between
-/// machines (bincode; f64 values travel bit for bit).
+/// Photons per work unit of a sharded compile: the default 2^19 photons of a slice are 2 units, the
+/// 50 M of wang2018 191.
+pub const UNIT_PHOTONS: u64 = 1 << 18;
+
+/// One g slice of an [`MsLobes`] table before assembly.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SlicePart {
     /// Lobes of all orders >= 2 per albedo node, flat `[albedo, z, rho, theta(, phi)]`.
