@@ -235,6 +235,11 @@ enum Command {
         /// Where the bake's tables are compiled (cached).
         #[arg(long, default_value = "out")]
         tables: PathBuf,
+        /// Only the scale-out benchmark: each table (--only, default the MsLobes tables) compiled whole
+        /// vs as its work units one by one plus the merge; overhead, merge share, and the wall time
+        /// projected on 1, 8, 64 and 512 nodes (and at wang2018's size for lobe tables).
+        #[arg(long)]
+        shards: bool,
     },
     /// Evaluate a compiled table at one configuration.
     Eval {
@@ -913,9 +918,22 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             pop,
             gpu,
             tables,
+            shards,
         } => {
             let mut rows = Vec::new();
-            if gpu {
+            if shards {
+                let p = load(&pipeline)?;
+                let (text, r) = voltab::shard::bench::run(&p, &only, &|m| {
+                    if progress {
+                        eprintln!("{m}");
+                    }
+                })
+                .map_err(|e| anyhow::anyhow!(e))?;
+                if !json {
+                    print!("{text}");
+                }
+                rows.extend(r);
+            } else if gpu {
                 let (device, message) = voltab::render::gpu::select(voltab::render::gpu::DeviceRequest::Gpu)
                     .map_err(|e| anyhow::anyhow!(e))?;
                 eprintln!("{message}");

@@ -21,6 +21,7 @@
 //! duplicates, coverage, every part's digest) before it publishes anything, and names the shard and the
 //! units it lacks.
 
+pub mod bench;
 pub mod slurm;
 
 use std::collections::BTreeMap;

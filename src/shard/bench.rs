@@ -1,0 +1,177 @@
+//! `voltab bench --shards`: what sharding a table's compile costs and buys, measured side by side in
+//! one run.
+//!
+//! Input: a validated pipeline and the ids of tables to measure (default: its `MsLobes` tables).
+//! Output: rows ([`crate::stages::BenchRow`]) and a text report: the table compiled whole (as
+//! `voltab compile` does), each work unit computed alone one after another (as a shard task does, with
+//! every core of this machine), the merge of those units; the sharding overhead (units + merge over the
+//! whole compile), the merge's share, and the wall time projected on 1, 8, 64 and 512 nodes.
+//!
+//! Projection model (stated in the report): a node is this machine; units are spread over K nodes by
+//! the same longest-first rule [`super::assign`] uses, so a node's time is the sum of its units'
+//! measured times; wall time = the most loaded node + the measured merge + one task start (1 s,
+//! Slurm's array dispatch on the test cluster). The wang2018-size line scales the measured cost per
+//! photon of this table to wang2018's 50 M photons per medium for each of its g slices, in units of
+//! [`crate::tables::ms_lobes::UNIT_PHOTONS`] photons, and the merge by the raw size ratio of their
+//! 600 MB table to this one.
+
+use std::time::Instant;
+
+use super::{Payload, Unit, assemble_table, compile_units, decode_part, encode_part};
+use crate::compile::build_table;
+use crate::pipeline::ValidatedPipeline;
+use crate::stages::BenchRow;
+use crate::tables::TableDef;
+
+/// Seconds Slurm takes to dispatch an array task (measured on the test cluster: about 1 s).
+const TASK_START_S: f64 = 1.0;
+/// wang2018: photons traced per medium and the size of their stored table.
+const WANG_PHOTONS: u64 = 50_000_000;
+const WANG_TABLE_BYTES: f64 = 600e6;
+
+/// Longest-first makespan of `costs` over `k` nodes.
+fn makespan(costs: &[f64], k: usize) -> f64 {
+    let mut sorted: Vec<f64> = costs.to_vec();
+    sorted.sort_by(|a, b| b.total_cmp(a));
+    let mut load = vec![0.0f64; k.max(1)];
+    for c in sorted {
+        let (i, _) = load.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)).unwrap_or((0, &0.0));
+        load[i] += c;
+    }
+    load.into_iter().fold(0.0, f64::max)
+}
+
+/// Runs the benchmark; `say` reports progress.
+pub fn run(p: &ValidatedPipeline, only: &[String], say: &dyn Fn(&str)) -> Result<(String, Vec<BenchRow>), String> {
+    let ids: Vec<String> = if only.is_empty() {
+        p.tables().iter().filter(|t| matches!(t.def(), TableDef::MsLobes(_))).map(|t| t.id().to_string()).collect()
+    } else {
+        only.to_vec()
+    };
+    let mut text = String::new();
+    let mut rows = Vec::new();
+    let all_units = compile_units(p);
+    for id in &ids {
+        let Some((ti, t)) = p.tables().iter().enumerate().find(|(_, t)| t.id() == id) else {
+            return Err(format!("--only {id}: no such table"));
+        };
+        say(&format!("{id}: the whole table, as voltab compile builds it"));
+        let t0 = Instant::now();
+        let (whole, sidecar) = build_table(t, &|_| {}).map_err(|e| e.to_string())?;
+        let local_ms = t0.elapsed().as_secs_f64() * 1e3;
+        // Each unit alone, one after another, as a shard task computes it (encoded as a part file).
+        let units: Vec<&Unit> = all_units.iter().filter(|u| u.table == ti).collect();
+        let n = units.len();
+        let mut unit_ms = Vec::with_capacity(n);
+        let mut encoded = Vec::with_capacity(n);
+        for (i, u) in units.iter().enumerate() {
+            say(&format!("{id}: unit {} of {n}", i + 1));
+            let t1 = Instant::now();
+            let payload = match u.part {
+                None => {
+                    let (vtab, sc) = build_table(t, &|_| {}).map_err(|e| e.to_string())?;
+                    Payload::Table { vtab, sidecar: serde_json::to_vec(&sc).unwrap_or_default() }
+                }
+                Some(k) => Payload::Unit {
+                    part: t.def().generate_unit(t.key(), k, &|_| {}).map_err(|e| e.to_string())?,
+                    ms: 0.0,
+                },
+            };
+            encoded.push(encode_part(&payload));
+            unit_ms.push(t1.elapsed().as_secs_f64() * 1e3);
+        }
+        say(&format!("{id}: merge"));
+        let t2 = Instant::now();
+        let merged = if n == 1 {
+            match decode_part(&encoded[0])? {
+                Payload::Table { vtab, .. } => vtab,
+                Payload::Unit { .. } => return Err("a whole table's unit holds a part".into()),
+            }
+        } else {
+            let mut parts = Vec::new();
+            for bytes in &encoded {
+                match decode_part(bytes)? {
+                    Payload::Unit { part, .. } => crate::tables::UnitPart::absorb(&mut parts, part),
+                    Payload::Table { .. } => return Err("a split table's unit holds a whole table".into()),
+                }
+            }
+            assemble_table(t, parts, 0.0, 0.0).map_err(|e| e.to_string())?.0
+        };
+        let merge_ms = t2.elapsed().as_secs_f64() * 1e3;
+        let identical = merged == whole;
+        let units_ms: f64 = unit_ms.iter().sum();
+        let overhead = (units_ms + merge_ms) / local_ms - 1.0;
+        let max_unit = unit_ms.iter().copied().fold(0.0, f64::max);
+        text.push_str(&format!(
+            "{id} ({}): {n} work units\n  whole table            {:>10.0} ms (generate + check + encode, every core)\n  units one by one       {:>10.0} ms (sum; largest {:.0} ms, mean {:.0} ms)\n  merge                  {:>10.0} ms ({:.2} % of the whole compile)\n  sharding overhead      {:>+10.2} % of the whole compile (units + merge − whole: setup repeated per unit; no unit computes another's work)\n  merged bytes           {}\n",
+            t.def().kind(),
+            local_ms,
+            units_ms,
+            max_unit,
+            units_ms / n as f64,
+            merge_ms,
+            100.0 * merge_ms / local_ms,
+            100.0 * overhead,
+            if identical { "identical to the whole table" } else { "DIFFER from the whole table" },
+        ));
+        rows.push(BenchRow {
+            what: format!("{id}: whole vs {n} units + merge"),
+            baseline_ms: local_ms,
+            candidate_ms: units_ms + merge_ms,
+            speedup: local_ms / (units_ms + merge_ms),
+            note: format!(
+                "merge {:.2} % of whole; bytes {}",
+                100.0 * merge_ms / local_ms,
+                if identical { "identical" } else { "DIFFER" }
+            ),
+        });
+        text.push_str("  projected wall time (node = this machine; longest-first; + merge + 1 s task start):\n");
+        for k in [1usize, 8, 64, 512] {
+            let wall = makespan(&unit_ms, k) + merge_ms + TASK_START_S * 1e3;
+            text.push_str(&format!(
+                "    {k:>4} nodes {:>10.1} s  ({:.1}× the whole compile)\n",
+                wall / 1e3,
+                local_ms / wall
+            ));
+            rows.push(BenchRow {
+                what: format!("{id}: projected on {k} nodes"),
+                baseline_ms: local_ms,
+                candidate_ms: wall,
+                speedup: local_ms / wall,
+                note: "model: longest-first over measured unit times + merge + 1 s".into(),
+            });
+        }
+        if let TableDef::MsLobes(def) = t.def() {
+            let slices = def.g_values().len();
+            let walk_ms: Vec<f64> = unit_ms[..unit_ms.len() - 1].to_vec();
+            let photons_here = def.photons as f64 * slices as f64;
+            let ms_per_photon = walk_ms.iter().sum::<f64>() / photons_here;
+            let per_unit = ms_per_photon * crate::tables::ms_lobes::UNIT_PHOTONS as f64;
+            let wang_units = WANG_PHOTONS.div_ceil(crate::tables::ms_lobes::UNIT_PHOTONS) as usize * slices;
+            let raw = sidecar.raw_bytes.max(1) as f64;
+            let wang_merge = merge_ms * (WANG_TABLE_BYTES / raw).max(1.0);
+            let check = unit_ms.last().copied().unwrap_or(0.0);
+            let mut costs = vec![per_unit; wang_units];
+            costs.push(check);
+            text.push_str(&format!(
+                "  wang2018 size ({} photons per g slice × {slices} slices = {wang_units} units of {:.1} s, merge scaled ×{:.1} to {:.0} s):\n",
+                WANG_PHOTONS,
+                per_unit / 1e3,
+                WANG_TABLE_BYTES / raw,
+                wang_merge / 1e3
+            ));
+            for k in [1usize, 8, 64, 512] {
+                let wall = makespan(&costs, k) + wang_merge + TASK_START_S * 1e3;
+                text.push_str(&format!("    {k:>4} nodes {:>10.1} min\n", wall / 6e4));
+                rows.push(BenchRow {
+                    what: format!("{id} at wang2018 size: projected on {k} nodes"),
+                    baseline_ms: makespan(&costs, 1) + wang_merge,
+                    candidate_ms: wall,
+                    speedup: (makespan(&costs, 1) + wang_merge) / wall,
+                    note: format!("{wang_units} units; measured {:.3} µs per photon", ms_per_photon * 1e3),
+                });
+            }
+        }
+    }
+    Ok((text, rows))
+}
