@@ -110,6 +110,32 @@ fn legendre_and_zh_coefficients_match_quadrature() {
     }
 }
 
+/// The smallest ZH order the range allows (`zh_order: 0`, a table that keeps only l = 0): the one
+/// stored coefficient is Y₀₀ = 1/√(4π) for every g (the phase integrates to one), and the error
+/// report probes only the orders stored (it indexed l = 1, 2 past the end before).
+#[test]
+fn zh_order_zero_stores_y00_and_reports_its_errors() {
+    let def = PhaseHg {
+        g: GValues::List(vec![-0.99, 0.0, 0.99]),
+        mu_bins: 64,
+        xi_bins: 64,
+        zh_order: 0,
+        element: Element::F64,
+        ..PhaseHg::default()
+    };
+    let gn = def.generate(&[7; 32], &|_| {}).unwrap();
+    let t = PhaseHgTable::from_arrays(&gn.arrays, &gn.values).unwrap();
+    for gi in 0..3 {
+        let zh = t.zh(gi).unwrap();
+        assert_eq!(zh.len(), 1);
+        assert!((zh[0] - 1.0 / (4.0 * std::f64::consts::PI).sqrt()).abs() < 1e-15, "{zh:?}");
+    }
+    let errors = t.error_estimates(&[7; 32]);
+    let legendre = errors.iter().find(|e| e.name.contains("legendre")).expect("a Legendre-moment estimate");
+    assert!(legendre.value < 1e-12, "{legendre:?}");
+    assert!(errors.iter().all(|e| e.value.is_finite()), "{errors:?}");
+}
+
 /// Node accuracy at the extremes: F64 tables within 1e-13 of the double-double closed forms,
 /// F32 tables within f32 rounding (2^-24 ≈ 6e-8).
 #[test]

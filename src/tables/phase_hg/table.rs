@@ -201,8 +201,9 @@ impl PhaseHgTable {
             for j in strided(self.xi_bins, 4096) {
                 inv_abs = inv_abs.max((s[2][j] - hg_hp::sample_mu_ref(j as f64 / xi_last, g)).abs());
             }
-            let order = s[3].len() - 1;
-            for l in [0, 1, 2, order / 2, order] {
+            // ZH coefficients l = 0..=zh_order (just l = 0 at zh_order 0): probe the ones stored.
+            let order = s[4].len().saturating_sub(1);
+            for l in [0, 1, 2, order / 2, order].into_iter().filter(|&l| l <= order) {
                 let reference = hg_hp::legendre_moment_quadrature(l as u32, g);
                 zh_abs = zh_abs.max((s[4][l] - reference).abs());
             }
