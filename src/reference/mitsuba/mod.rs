@@ -45,7 +45,6 @@ pub mod xml;
 #[cfg(test)]
 mod tests;
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
@@ -253,13 +252,15 @@ pub fn export(scene: &Scene, options: &ExportOptions, out: &Path) -> Result<Mani
     Ok(built.manifest)
 }
 
-/// Writes `bytes` to a temporary file beside `path`, then renames it over `path`.
+/// Creates `path`'s folder, then writes it through the project's one atomic writer
+/// ([`crate::cache::write_atomic`]: temp file, fsync, rename).
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
-    let io = |p: &Path, e: std::io::Error| ExportError::Io { path: p.to_path_buf(), message: e.to_string() };
     let dir = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| io(dir, e))?;
-    tmp.write_all(bytes).map_err(|e| io(path, e))?;
-    tmp.persist(path).map_err(|e| io(path, e.error))?;
-    Ok(())
+    std::fs::create_dir_all(dir).map_err(|e| ExportError::Io { path: dir.to_path_buf(), message: e.to_string() })?;
+    crate::cache::write_atomic(path, bytes).map_err(|e| match e {
+        crate::cache::CacheError::Io { source, .. } => {
+            ExportError::Io { path: path.to_path_buf(), message: source.to_string() }
+        }
+        other => ExportError::Io { path: path.to_path_buf(), message: other.to_string() },
+    })
 }
