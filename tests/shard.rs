@@ -259,11 +259,36 @@ fn a_no_op_compile_trusts_a_fingerprint_but_never_a_changed_file() {
     let out = d.path().join("out");
     let opts = CompileOptions { out_dir: out.clone(), only: vec!["shard_hg".into()], ..Default::default() };
     compile(&p, &opts).unwrap();
-    // Past the racy window, a no-op verifies once and records the fingerprint; the next trusts it.
-    std::thread::sleep(std::time::Duration::from_nanos(voltab::cache::RACY_NS as u64 + 100_000_000));
+    let cache = out.join(".voltab-cache");
+    let fp_path = || {
+        std::fs::read_dir(&cache)
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .find(|p| p.extension().is_some_and(|x| x == "fp"))
+            .expect("a fingerprint beside the cached table")
+    };
+    let fp = || std::fs::read_to_string(fp_path()).unwrap();
+    // The writer records the fingerprint of what it published: the next no-op reads no chunk (a
+    // verification would rewrite the record as "verified").
+    let written = fp();
+    assert!(written.trim_end().ends_with(" written"), "{written}");
     for _ in 0..2 {
         assert_eq!(compile(&p, &opts).unwrap().tables[0].status, Status::UpToDate);
+        assert_eq!(fp(), written, "trusted without verifying");
     }
+    // Without a record, a no-op verifies completely; a verification within the racy window of the
+    // file's last change is repeated next time, one past it is trusted.
+    std::fs::remove_file(fp_path()).unwrap();
+    assert_eq!(compile(&p, &opts).unwrap().tables[0].status, Status::UpToDate);
+    let racy = fp();
+    assert!(racy.trim_end().ends_with(" verified"), "{racy}");
+    std::thread::sleep(std::time::Duration::from_nanos(voltab::cache::RACY_NS as u64 + 100_000_000));
+    assert_eq!(compile(&p, &opts).unwrap().tables[0].status, Status::UpToDate);
+    let settled = fp();
+    assert_ne!(settled, racy, "a racy verification is repeated");
+    assert_eq!(compile(&p, &opts).unwrap().tables[0].status, Status::UpToDate);
+    assert_eq!(fp(), settled, "a verification past the racy window is trusted");
     // Any write changes the status-change time: the file is verified again and rebuilt.
     let t = out.join("shard_hg.vtab");
     let mut bytes = std::fs::read(&t).unwrap();

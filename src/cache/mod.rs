@@ -134,11 +134,16 @@ impl OutputDir {
 
     /// True if `<out>/<id>.vtab` holds `key`, verifies completely, and has its sidecar.
     ///
-    /// A file verified once is not read again while its fingerprint — size, inode, modification and
-    /// status-change times (any write or re-link changes the last) — matches the one recorded at that
-    /// verification and its header still carries `key`; a fingerprint taken within
-    /// [`RACY_NS`] of the file's last change is not trusted (a write in the same clock tick could go
-    /// unseen), as build systems do. `voltab verify` always reads every chunk.
+    /// A file is not read again while its fingerprint — size, inode, modification and status-change
+    /// times (any write or re-link changes the last) — matches the one recorded when it was written
+    /// by [`OutputDir::store`] or last verified completely, and its header still carries `key`. A
+    /// fingerprint recorded by a verification within [`RACY_NS`] of the file's last change is not
+    /// trusted (a write in the same clock tick could go unseen). One recorded by the writer is: the
+    /// file is a fresh inode, filled under a private temporary name and renamed into place, so only an
+    /// in-place rewrite of the same size in the filesystem's timestamp granule after the rename could
+    /// hide — the assumption make, ninja and cargo make of every output (and on Linux ≥ 6.13, ext4,
+    /// xfs, btrfs and tmpfs stamp a change after a `stat` with a fine-grained time, which closes even
+    /// that). `voltab verify` always reads every chunk.
     pub fn is_up_to_date(&self, id: &str, key: &[u8; 32]) -> bool {
         if !self.sidecar_path(id).is_file() {
             return false;
@@ -151,11 +156,19 @@ impl OutputDir {
             return VtabReader::open(&path).is_ok_and(|r| r.header().content_key == *key);
         }
         let ok = file_holds(&path, key);
-        if ok && let Some(mut fp) = Fingerprint::of(&path) {
-            fp.verified_ns = now_ns();
-            let _ = write_atomic(&fp_path, fp.to_line().as_bytes());
+        if ok {
+            self.record_fingerprint(&path, key, Origin::Verified);
         }
         ok
+    }
+
+    /// Writes `.voltab-cache/<key>.fp` for `path` (best effort: without it the next check verifies).
+    fn record_fingerprint(&self, path: &Path, key: &[u8; 32], origin: Origin) {
+        if let Some(mut fp) = Fingerprint::of(path) {
+            fp.verified_ns = now_ns();
+            fp.origin = origin;
+            let _ = write_atomic(&self.cached(key, "fp"), fp.to_line().as_bytes());
+        }
     }
 
     /// If the cache holds a verified table for `key`, makes it `<out>/<id>.vtab` (with its sidecar)
@@ -176,7 +189,10 @@ impl OutputDir {
         write_atomic(&cv, vtab)?;
         write_atomic(&cj, sidecar)?;
         self.link_atomic(&cv, &self.table_path(id))?;
-        self.link_atomic(&cj, &self.sidecar_path(id))
+        self.link_atomic(&cj, &self.sidecar_path(id))?;
+        // After the last link (a link changes the inode's status-change time).
+        self.record_fingerprint(&self.table_path(id), key, Origin::Written);
+        Ok(())
     }
 
     /// Publishes `src` at `dst` atomically: hard link (or copy) to a temp name, then rename.
@@ -202,7 +218,16 @@ fn now_ns() -> u128 {
     std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos())
 }
 
-/// What `is_up_to_date` remembers of a verified file (one line in `.voltab-cache/<key>.fp`).
+/// Who vouched for a fingerprinted file's content.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Origin {
+    /// [`OutputDir::store`] wrote it (a fresh inode renamed into place).
+    Written,
+    /// A complete verification read it.
+    Verified,
+}
+
+/// What `is_up_to_date` remembers of a file it may trust (one line in `.voltab-cache/<key>.fp`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Fingerprint {
     len: u64,
@@ -210,8 +235,9 @@ struct Fingerprint {
     dev: u64,
     mtime_ns: u128,
     ctime_ns: u128,
-    /// When the file was verified completely.
+    /// When the file was written or verified completely.
     verified_ns: u128,
+    origin: Origin,
 }
 
 impl Fingerprint {
@@ -230,6 +256,7 @@ impl Fingerprint {
             mtime_ns: ns(m.mtime(), m.mtime_nsec())?,
             ctime_ns: ns(m.ctime(), m.ctime_nsec())?,
             verified_ns: 0,
+            origin: Origin::Verified,
         })
     }
 
@@ -239,8 +266,12 @@ impl Fingerprint {
     }
 
     fn to_line(self) -> String {
+        let origin = match self.origin {
+            Origin::Written => "written",
+            Origin::Verified => "verified",
+        };
         format!(
-            "voltab-fp 1 {} {} {} {} {} {}\n",
+            "voltab-fp 2 {} {} {} {} {} {} {origin}\n",
             self.len, self.ino, self.dev, self.mtime_ns, self.ctime_ns, self.verified_ns
         )
     }
@@ -249,9 +280,14 @@ impl Fingerprint {
         let bytes = bounded::read_regular(path, 4096).ok()?;
         let text = std::str::from_utf8(&bytes).ok()?;
         let f: Vec<&str> = text.split_whitespace().collect();
-        if f.len() != 8 || f[0] != "voltab-fp" || f[1] != "1" {
+        if f.len() != 9 || f[0] != "voltab-fp" || f[1] != "2" {
             return None;
         }
+        let origin = match f[8] {
+            "written" => Origin::Written,
+            "verified" => Origin::Verified,
+            _ => return None,
+        };
         Some(Self {
             len: f[2].parse().ok()?,
             ino: f[3].parse().ok()?,
@@ -259,17 +295,19 @@ impl Fingerprint {
             mtime_ns: f[5].parse().ok()?,
             ctime_ns: f[6].parse().ok()?,
             verified_ns: f[7].parse().ok()?,
+            origin,
         })
     }
 
-    /// The file is the one verified, and the verification came clearly after its last change.
+    /// The file is the one written or verified, and a verification came clearly after its last change.
     fn trusted_for(&self, now: &Fingerprint) -> bool {
         self.len == now.len
             && self.ino == now.ino
             && self.dev == now.dev
             && self.mtime_ns == now.mtime_ns
             && self.ctime_ns == now.ctime_ns
-            && self.verified_ns > self.mtime_ns.max(self.ctime_ns).saturating_add(RACY_NS)
+            && (self.origin == Origin::Written
+                || self.verified_ns > self.mtime_ns.max(self.ctime_ns).saturating_add(RACY_NS))
     }
 }
 
