@@ -302,8 +302,9 @@ fn a_no_op_compile_trusts_a_fingerprint_but_never_a_changed_file() {
 
 #[test]
 fn a_slice_split_into_photon_batches_is_the_slice_walked_whole() {
-    // Two batches: UNIT_PHOTONS and a short remainder, merged from separate work units.
-    let photons = voltab::tables::ms_lobes::UNIT_PHOTONS + 3000;
+    // Two batches: MIN_UNIT_PHOTONS (a coarse grid's unit) and a short remainder, merged from
+    // separate work units.
+    let photons = voltab::tables::ms_lobes::MIN_UNIT_PHOTONS + 3000;
     let d = common::tempdir();
     let f = common::write(
         d.path(),
@@ -324,4 +325,36 @@ fn a_slice_split_into_photon_batches_is_the_slice_walked_whole() {
     let out = d.path().join("merged");
     merge(&p, &dirs, &out).unwrap();
     assert_eq!(tables(&out), tables(&local));
+}
+
+/// A unit's part file holds its slice's whole tally, so fine grids get bigger units: at most
+/// `TALLY_BYTES_PER_PHOTON` tally bytes per photon (the size of the walk's real tally, from its
+/// configuration), the smallest such power of two, never below `MIN_UNIT_PHOTONS`.
+#[test]
+fn fine_grids_get_units_big_enough_to_carry_their_tally() {
+    use voltab::tables::ms_lobes::{MIN_UNIT_PHOTONS, TALLY_BYTES_PER_PHOTON};
+    let d = common::tempdir();
+    let f = common::write(
+        d.path(),
+        "units.ron",
+        "(tables: [MsLobes(id: \"table2\"), MsLobes(id: \"wax\", materials: [\"Wax\"], albedo_grid: 0, lobe: Full), \
+         MsLobes(id: \"coarse\", materials: [], g: [0.8], albedo_grid: 0, albedos: [0.5], rho_bins: 4, z_bins: 4, \
+         theta_bins: 3, direction_bins: 4, photons: 5000, max_order: 16)])",
+    );
+    let p = load_and_validate(&f, &Disk).unwrap();
+    let mut fine = 0;
+    for t in p.tables() {
+        let voltab::tables::TableDef::MsLobes(def) = t.def() else { panic!("an MsLobes table") };
+        let cfg = def.lobe_config(0, 0.5, t.key());
+        let tally_bytes = 8 * (cfg.cells() * cfg.bins() * (1 + cfg.albedos.len())) as u64;
+        let unit = def.unit_photons();
+        assert!(unit.is_power_of_two() && unit >= MIN_UNIT_PHOTONS, "{}: {unit}", t.id());
+        assert!(unit * TALLY_BYTES_PER_PHOTON >= tally_bytes, "{}: {unit} photons for {tally_bytes} B", t.id());
+        if unit > MIN_UNIT_PHOTONS {
+            fine += 1;
+            assert!(unit / 2 * TALLY_BYTES_PER_PHOTON < tally_bytes, "{}: {unit} is not the smallest", t.id());
+        }
+        assert_eq!(def.photon_units() as u64, def.photons.div_ceil(unit).max(1), "{}", t.id());
+    }
+    assert_eq!(fine, 2, "the Table 2 and Wax grids are fine, the 4 x 4 one coarse");
 }

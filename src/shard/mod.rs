@@ -9,7 +9,7 @@
 //!
 //! Work units follow the axes the generators key their random streams on
 //! ([`TableDef::units`](crate::tables::TableDef::units)): an `MsLobes` table splits into photon
-//! batches of `UNIT_PHOTONS` per g slice (integer tallies, summed in the merge) plus one unit per
+//! batches (`MsLobes::unit_photons`, 2^18 or more on fine grids) per g slice (integer tallies, summed in the merge) plus one unit per
 //! check reference, a `ZhResponse` table into its (emitter, g) responses plus its walk references,
 //! and every other table is one unit. A unit computes the same bits wherever it runs, and
 //! [`TableDef::assemble`](crate::tables::TableDef::assemble) is the code `voltab compile` itself runs

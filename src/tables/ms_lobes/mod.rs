@@ -401,10 +401,28 @@ impl MsLobes {
         self.slice_from_tallies(gi, key, &[t])
     }
 
-    /// How many photon batches of [`UNIT_PHOTONS`] a slice's walk splits into (work units of a sharded
-    /// compile).
+    /// Photons per work unit of a sharded compile: [`MIN_UNIT_PHOTONS`], or more on fine grids. A
+    /// unit's part file holds the slice's whole integer tally (8 bytes per (cell, direction bin,
+    /// channel)) whatever its photon count, and writing plus reading it costs about 3 ns per byte
+    /// against about 30 µs per photon walked (`voltab bench --shards`, Table 2 grid); at one photon
+    /// per [`TALLY_BYTES_PER_PHOTON`] tally bytes the part files stay near 1 % of the walk. A power
+    /// of two, a function of the grid alone: the split, and with it every byte, depends only on the
+    /// pipeline.
+    pub fn unit_photons(&self) -> u64 {
+        let channels = 1 + self.albedo_values().len() as u64;
+        let phi = match self.lobe {
+            LobeKind::Symmetric => 1,
+            LobeKind::Full => u64::from(self.phi_bins),
+        };
+        let tally_bytes =
+            8 * u64::from(self.rho_bins) * u64::from(self.z_bins) * u64::from(self.direction_bins) * phi * channels;
+        tally_bytes.div_ceil(TALLY_BYTES_PER_PHOTON).next_power_of_two().max(MIN_UNIT_PHOTONS)
+    }
+
+    /// How many photon batches of [`MsLobes::unit_photons`] a slice's walk splits into (work units of a
+    /// sharded compile).
     pub fn photon_units(&self) -> usize {
-        self.photons.div_ceil(UNIT_PHOTONS).max(1) as usize
+        self.photons.div_ceil(self.unit_photons()).max(1) as usize
     }
 
     /// The integer tallies of photon batch `batch` of g slice `gi`: a work unit of a sharded compile.
@@ -416,11 +434,12 @@ impl MsLobes {
         progress: Progress<'_>,
     ) -> Result<lobe_transport::PhotonTally, GenerateError> {
         let (g, cfg) = self.slice_config(gi, key)?;
-        let start = batch as u64 * UNIT_PHOTONS;
+        let unit = self.unit_photons();
+        let start = batch as u64 * unit;
         if start >= cfg.photons {
             return Err(GenerateError::Layout(format!("photon batch {batch} out of range ({})", self.photon_units())));
         }
-        let end = (start + UNIT_PHOTONS).min(cfg.photons);
+        let end = (start + unit).min(cfg.photons);
         lobe_transport::tally(&cfg, start..end, progress)
             .map_err(|m| GenerateError::Layout(format!("lobe walk for g = {g}: {m}")))
     }
@@ -955,9 +974,11 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
     v
 }
 
-/// Photons per work unit of a sharded compile: the default 2^19 photons of a slice are 2 units, the
-/// 50 M of wang2018 191.
-pub const UNIT_PHOTONS: u64 = 1 << 18;
+/// The fewest photons in a work unit of a sharded compile ([`MsLobes::unit_photons`]).
+pub const MIN_UNIT_PHOTONS: u64 = 1 << 18;
+
+/// Tally bytes per photon of a work unit at most ([`MsLobes::unit_photons`]).
+pub const TALLY_BYTES_PER_PHOTON: u64 = 64;
 
 /// One g slice of an [`MsLobes`] table before assembly.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
