@@ -46,6 +46,13 @@ enum Command {
         /// and an adapter is found, else the CPU (the choice and the reason are printed).
         #[arg(long, value_enum, default_value_t = voltab::render::gpu::DeviceRequest::Auto)]
         device: voltab::render::gpu::DeviceRequest,
+        /// Compute only shard I of N of the lightmap bakes' texel tiles into --out (a shard folder
+        /// for `voltab merge`), reading the tables from --tables; `auto` as for `compile --shard`.
+        #[arg(long, requires = "tables")]
+        shard: Option<String>,
+        /// With --shard: the folder holding the pipeline's compiled (merged) tables.
+        #[arg(long, requires = "shard")]
+        tables: Option<PathBuf>,
     },
     /// Compile tables (incrementally: unchanged tables are not recomputed).
     Compile {
@@ -87,6 +94,9 @@ enum Command {
         /// Print the summary as JSON on stdout.
         #[arg(long)]
         json: bool,
+        /// Bake shards: where the other stages' real-time effects run (as for `voltab run`).
+        #[arg(long, value_enum, default_value_t = voltab::render::gpu::DeviceRequest::Auto)]
+        device: voltab::render::gpu::DeviceRequest,
     },
     /// Write a Slurm job array that compiles a pipeline in N shards and a merge job that depends on it;
     /// with --submit, submit both (only the shards not yet finished) and print the job ids.
@@ -652,10 +662,36 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
         json: false,
         scene: bundled_scenes(),
         device: voltab::render::gpu::DeviceRequest::Auto,
+        shard: None,
+        tables: None,
     });
     let cpu_device = voltab::render::gpu::Device::Cpu;
     match cmd {
-        Command::Run { pipeline, out, jobs, json, scene, device } => {
+        Command::Run { pipeline, out, json, scene, shard: Some(shard), tables: Some(tables), jobs, .. } => {
+            let spec = voltab::shard::ShardSpec::parse(&shard, &|k| std::env::var(k).ok())?;
+            let p = planned(load(&pipeline)?, &scene, true)?;
+            let base = base_dir(&p);
+            let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress, device: &cpu_device };
+            let run = || voltab::shard::bake::bake_shard(&p, &scene, spec, &ctx, &out);
+            let s = match jobs {
+                Some(j) => rayon::ThreadPoolBuilder::new().num_threads(j).build()?.install(run)?,
+                None => run()?,
+            };
+            if json {
+                println!("{}", serde_json::to_string_pretty(&s)?);
+            } else {
+                println!(
+                    "bake shard {}: {} of {} tiles computed, {} reused from an earlier attempt, in {:.0} ms → {}",
+                    s.shard,
+                    s.computed.len(),
+                    s.units_total,
+                    s.reused.len(),
+                    s.total_ms,
+                    s.dir.display()
+                );
+            }
+        }
+        Command::Run { pipeline, out, jobs, json, scene, device, .. } => {
             let p = planned(load(&pipeline)?, &scene, json)?;
             let summary = compile(&p, &CompileOptions { out_dir: out.clone(), only: Vec::new(), jobs, progress })?;
             let mut stage_results = Vec::new();
@@ -726,10 +762,31 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 );
             }
         }
-        Command::Merge { shards, out, pipeline, json } => {
+        Command::Merge { shards, out, pipeline, json, device } => {
             let first = voltab::shard::read_manifest(&shards[0])?;
             let path = pipeline.unwrap_or_else(|| first.pipeline.clone());
             let p = planned(load(&path)?, &first.scenes, true)?;
+            if first.job == voltab::shard::Job::Bake {
+                let base = base_dir(&p);
+                let device = if p.stages().iter().any(|s| s.def().uses_device()) {
+                    let (d, message) = voltab::render::gpu::select(device).map_err(|e| anyhow::anyhow!(e))?;
+                    eprintln!("{message}");
+                    d
+                } else {
+                    cpu_device.clone()
+                };
+                let ctx = voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress, device: &device };
+                let results = voltab::shard::bake::merge_bake(&p, &shards, &ctx)?;
+                if json {
+                    println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "stages": results }))?);
+                } else {
+                    for (id, r) in &results {
+                        println!("stage      {id:<20} {}", r.summary);
+                    }
+                    println!("{} stages from {} bake shards → {}", results.len(), shards.len(), out.display());
+                }
+                return Ok(ExitCode::SUCCESS);
+            }
             let s = voltab::shard::merge(&p, &shards, &out)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&s)?);

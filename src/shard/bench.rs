@@ -92,14 +92,18 @@ pub fn run(p: &ValidatedPipeline, only: &[String], say: &dyn Fn(&str)) -> Result
         let merged = if n == 1 {
             match decode_part(&encoded[0])? {
                 Payload::Table { vtab, .. } => vtab,
-                Payload::Unit { .. } => return Err("a whole table's unit holds a part".into()),
+                Payload::Unit { .. } | Payload::Texels { .. } => {
+                    return Err("a whole table's unit holds a part".into());
+                }
             }
         } else {
             let mut parts = Vec::new();
             for bytes in &encoded {
                 match decode_part(bytes)? {
                     Payload::Unit { part, .. } => crate::tables::UnitPart::absorb(&mut parts, part),
-                    Payload::Table { .. } => return Err("a split table's unit holds a whole table".into()),
+                    Payload::Table { .. } | Payload::Texels { .. } => {
+                        return Err("a split table's unit holds no table part".into());
+                    }
                 }
             }
             read_ms = t2.elapsed().as_secs_f64() * 1e3;

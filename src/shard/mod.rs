@@ -24,6 +24,7 @@
 //! duplicates, coverage, every part's digest) before it publishes anything, and names the shard and the
 //! units it lacks.
 
+pub mod bake;
 pub mod bench;
 pub mod slurm;
 
@@ -189,12 +190,27 @@ pub fn pipeline_key(p: &ValidatedPipeline) -> String {
     h.finalize().to_hex().to_string()
 }
 
+/// What a shard task computed: table units (`voltab compile --shard`) or bake tiles
+/// (`voltab run --shard`, [`bake`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Job {
+    /// Work units of the pipeline's tables.
+    #[default]
+    Compile,
+    /// Texel tiles of the pipeline's lightmap bakes.
+    Bake,
+}
+
 /// `shard.json`: what a shard folder holds.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Manifest {
     /// Format version.
     pub format: u32,
+    /// What the shard computed (absent in compile shards written before bake tiles existed).
+    #[serde(default)]
+    pub job: Job,
     /// The voltab that wrote it.
     pub voltab_version: String,
     /// The pipeline file (as given on the command line).
@@ -234,6 +250,8 @@ enum Payload {
     Table { vtab: Vec<u8>, sidecar: Vec<u8> },
     /// One unit of a split table and its generation time.
     Unit { part: UnitPart, ms: f64 },
+    /// One tile of a bake: its texels' estimates and the time they took.
+    Texels { estimates: Vec<crate::stages::bake::transport::Estimate>, ms: f64 },
 }
 
 /// Sharding failed.
@@ -410,6 +428,7 @@ pub fn compile_shard(
     }
     let manifest = Manifest {
         format: FORMAT,
+        job: Job::Compile,
         voltab_version: env!("CARGO_PKG_VERSION").into(),
         pipeline: p.path().to_path_buf(),
         scenes: scenes.to_vec(),
@@ -445,7 +464,7 @@ pub fn read_manifest(dir: &Path) -> Result<Manifest, ShardError> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             return Err(shard_err(
                 format!("no {MANIFEST}: this shard's task did not finish"),
-                "rerun its task (`voltab compile <pipeline> --shard I/N --out <this folder>`, or resubmit the Slurm array task): finished units are reused",
+                "rerun its task (`voltab compile|run <pipeline> --shard I/N --out <this folder>`, or resubmit the Slurm array task): finished units are reused",
             ));
         }
         Err(e) => return Err(shard_err(format!("cannot read {MANIFEST}: {e}"), "check the folder's permissions")),
@@ -476,14 +495,98 @@ pub struct MergeSummary {
 /// digest), then publishes each table atomically through the output folder's cache.
 pub fn merge(p: &ValidatedPipeline, dirs: &[PathBuf], out_dir: &Path) -> Result<MergeSummary, ShardError> {
     let t0 = Instant::now();
+    let units = compile_units(p);
+    let checked = check_shards(Job::Compile, &pipeline_key(p), &units, dirs)?;
+    let read_part = |u: &Unit| checked.read(u);
+    let check_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t1 = Instant::now();
+    let out = OutputDir::open(out_dir, || {
+        eprintln!("waiting for another voltab run that is using {}", out_dir.display());
+    })?;
+    let mut results = Vec::new();
+    for (ti, t) in p.tables().iter().enumerate() {
+        let idx: Vec<usize> = (0..units.len()).filter(|&i| units[i].table == ti).collect();
+        let status = if out.is_up_to_date(t.id(), t.key()) {
+            Status::UpToDate
+        } else {
+            let (vtab, sidecar) = if let [i] = idx[..]
+                && units[i].part.is_none()
+            {
+                match read_part(&units[i])? {
+                    Payload::Table { vtab, sidecar } => (vtab, sidecar),
+                    Payload::Unit { .. } | Payload::Texels { .. } => return Err(mismatch(t)),
+                }
+            } else {
+                let mut parts = Vec::with_capacity(idx.len());
+                let (mut generate_ms, mut check_ms) = (0.0, 0.0);
+                for &i in &idx {
+                    match read_part(&units[i])? {
+                        Payload::Unit { part, ms } => {
+                            *(if part.is_check() { &mut check_ms } else { &mut generate_ms }) += ms;
+                            UnitPart::absorb(&mut parts, part);
+                        }
+                        Payload::Table { .. } | Payload::Texels { .. } => return Err(mismatch(t)),
+                    }
+                }
+                assemble_table(t, parts, generate_ms, check_ms)?
+            };
+            out.store(t.id(), t.key(), &vtab, &sidecar)?;
+            Status::Compiled
+        };
+        let sidecar = std::fs::read(out.sidecar_path(t.id()))
+            .ok()
+            .and_then(|b| serde_json::from_slice::<Sidecar>(&b).ok())
+            .ok_or_else(|| CacheError::Io {
+                path: out.sidecar_path(t.id()),
+                source: std::io::Error::other("sidecar missing after publishing"),
+            })?;
+        results.push(TableResult { id: t.id().into(), status, path: out.table_path(t.id()), sidecar });
+    }
+    Ok(MergeSummary { tables: results, shards: checked.shards, check_ms, publish_ms: t1.elapsed().as_secs_f64() * 1e3 })
+}
+
+/// Shard folders checked against a job: every unit's part located, read and its digest verified.
+struct Checked {
+    shards: usize,
+    have: BTreeMap<String, (PathBuf, PartEntry)>,
+}
+
+impl Checked {
+    /// Reads and decodes unit `u`'s part (its digest checked again: the file may have changed).
+    fn read(&self, u: &Unit) -> Result<Payload, ShardError> {
+        let Some((d, e)) = self.have.get(u.name.as_str()) else {
+            return Err(ShardError::Coverage {
+                message: format!("no shard holds unit {}", u.name),
+                help: "rerun the shard tasks and give all their folders to the merge".into(),
+            });
+        };
+        let bad = |message: String| ShardError::Shard {
+            path: d.clone(),
+            message: format!("unit {}: {}: {message}", u.name, e.file),
+            help: "rerun this shard's task (a corrupt part is recomputed)".into(),
+        };
+        if e.file.contains('/') || e.file.contains('\\') || e.file.starts_with('.') {
+            return Err(bad("not a file name inside the shard folder".into()));
+        }
+        let bytes =
+            crate::cache::bounded::read_regular(&d.join(&e.file), e.bytes).map_err(|err| bad(err.to_string()))?;
+        if blake3::hash(&bytes).to_hex().as_str() != e.blake3 {
+            return Err(bad("its blake3 does not match the manifest (corrupt)".into()));
+        }
+        decode_part(&bytes).map_err(bad)
+    }
+}
+
+/// Checks the shard folders `dirs` of a `job` with content key `key` and work units `units`:
+/// format and voltab version, job, key, one folder per shard index, every unit present once, every
+/// part's digest. Nothing is published before this passes.
+fn check_shards(job: Job, key: &str, units: &[Unit], dirs: &[PathBuf]) -> Result<Checked, ShardError> {
     if dirs.is_empty() {
         return Err(ShardError::Coverage {
             message: "no shard folders given".into(),
             help: "voltab merge SHARD_DIR… --out DIR".into(),
         });
     }
-    let key = pipeline_key(p);
-    let units = compile_units(p);
     let names: Vec<String> = units.iter().map(|u| u.name.clone()).collect();
     let mut manifests = Vec::with_capacity(dirs.len());
     for d in dirs {
@@ -498,6 +601,16 @@ pub fn merge(p: &ValidatedPipeline, dirs: &[PathBuf], out_dir: &Path) -> Result<
                     env!("CARGO_PKG_VERSION")
                 ),
                 "rerun the shard tasks with the same voltab as the merge",
+            ));
+        }
+        if m.job != job {
+            let what = |j: Job| match j {
+                Job::Compile => "compile shards (`voltab compile --shard`)",
+                Job::Bake => "bake shards (`voltab run --shard`)",
+            };
+            return Err(shard_err(
+                format!("one of the {}, but the merge's first folder is one of the {}", what(m.job), what(job)),
+                "merge the compile shards into the output folder first, then the bake shards in a second `voltab merge`",
             ));
         }
         if m.pipeline_key != key || m.units != names {
@@ -530,11 +643,11 @@ pub fn merge(p: &ValidatedPipeline, dirs: &[PathBuf], out_dir: &Path) -> Result<
             });
         }
     }
-    let owner = assign(&units, count);
-    let mut have: BTreeMap<&str, (&PathBuf, &PartEntry)> = BTreeMap::new();
+    let owner = assign(units, count);
+    let mut have: BTreeMap<String, (PathBuf, PartEntry)> = BTreeMap::new();
     for (d, m) in &manifests {
         for e in &m.parts {
-            have.insert(e.unit.as_str(), (d, e));
+            have.insert(e.unit.clone(), (d.clone(), e.clone()));
         }
     }
     let mut lacking: BTreeMap<u32, Vec<&str>> = BTreeMap::new();
@@ -557,76 +670,11 @@ pub fn merge(p: &ValidatedPipeline, dirs: &[PathBuf], out_dir: &Path) -> Result<
         });
     }
     // Every part read and checked before anything is published (one at a time: parts can be large).
-    let read_part = |u: &Unit| -> Result<Payload, ShardError> {
-        let (d, e) = have[u.name.as_str()];
-        let bad = |message: String| ShardError::Shard {
-            path: d.clone(),
-            message: format!("unit {}: {}: {message}", u.name, e.file),
-            help: "rerun this shard's task (a corrupt part is recomputed)".into(),
-        };
-        if e.file.contains('/') || e.file.contains('\\') || e.file.starts_with('.') {
-            return Err(bad("not a file name inside the shard folder".into()));
-        }
-        let bytes =
-            crate::cache::bounded::read_regular(&d.join(&e.file), e.bytes).map_err(|err| bad(err.to_string()))?;
-        if blake3::hash(&bytes).to_hex().as_str() != e.blake3 {
-            return Err(bad("its blake3 does not match the manifest (corrupt)".into()));
-        }
-        decode_part(&bytes).map_err(bad)
-    };
-    for u in &units {
-        read_part(u)?;
+    let checked = Checked { shards: manifests.len(), have };
+    for u in units {
+        checked.read(u)?;
     }
-    let check_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let t1 = Instant::now();
-    let out = OutputDir::open(out_dir, || {
-        eprintln!("waiting for another voltab run that is using {}", out_dir.display());
-    })?;
-    let mut results = Vec::new();
-    for (ti, t) in p.tables().iter().enumerate() {
-        let idx: Vec<usize> = (0..units.len()).filter(|&i| units[i].table == ti).collect();
-        let status = if out.is_up_to_date(t.id(), t.key()) {
-            Status::UpToDate
-        } else {
-            let (vtab, sidecar) = if let [i] = idx[..]
-                && units[i].part.is_none()
-            {
-                match read_part(&units[i])? {
-                    Payload::Table { vtab, sidecar } => (vtab, sidecar),
-                    Payload::Unit { .. } => return Err(mismatch(t)),
-                }
-            } else {
-                let mut parts = Vec::with_capacity(idx.len());
-                let (mut generate_ms, mut check_ms) = (0.0, 0.0);
-                for &i in &idx {
-                    match read_part(&units[i])? {
-                        Payload::Unit { part, ms } => {
-                            *(if part.is_check() { &mut check_ms } else { &mut generate_ms }) += ms;
-                            UnitPart::absorb(&mut parts, part);
-                        }
-                        Payload::Table { .. } => return Err(mismatch(t)),
-                    }
-                }
-                assemble_table(t, parts, generate_ms, check_ms)?
-            };
-            out.store(t.id(), t.key(), &vtab, &sidecar)?;
-            Status::Compiled
-        };
-        let sidecar = std::fs::read(out.sidecar_path(t.id()))
-            .ok()
-            .and_then(|b| serde_json::from_slice::<Sidecar>(&b).ok())
-            .ok_or_else(|| CacheError::Io {
-                path: out.sidecar_path(t.id()),
-                source: std::io::Error::other("sidecar missing after publishing"),
-            })?;
-        results.push(TableResult { id: t.id().into(), status, path: out.table_path(t.id()), sidecar });
-    }
-    Ok(MergeSummary {
-        tables: results,
-        shards: manifests.len(),
-        check_ms,
-        publish_ms: t1.elapsed().as_secs_f64() * 1e3,
-    })
+    Ok(checked)
 }
 
 fn mismatch(t: &ValidatedTable) -> ShardError {

@@ -245,6 +245,34 @@ impl BakeLightmaps {
 
     /// Runs the bake.
     pub fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        self.run_with(id, ctx, None)
+    }
+
+    /// The imported scene and the texel count of its atlas: what a farm bake splits into
+    /// [`TILE_TEXELS`]-texel tiles per mode.
+    pub fn scene_and_texels(&self, id: &str, ctx: &StageContext) -> Result<(Scene, usize), StageError> {
+        let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
+        let scene = Scene::load(&self.scene_path(ctx.base_dir))
+            .map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
+        let atlas = atlas::build(&scene, &self.atlas_options())
+            .map_err(|e| fail(e.to_string(), "add lightmap UVs to the scene's meshes"))?;
+        let texels = atlas.texels.len();
+        Ok((scene, texels))
+    }
+
+    /// The bake prepared once (scene, BVH, table slices, atlas) for computing its tiles.
+    pub fn tile_baker(&self, id: &str, ctx: &StageContext) -> Result<TileBaker<'_>, StageError> {
+        Ok(TileBaker { stage: self, id: id.to_string(), prepared: self.prepare(id, ctx)? })
+    }
+
+    /// Runs the bake; with `given`, each mode's estimates (per mode in `self.modes` order, with the
+    /// time they took \[ms\]) come from a farm's tiles instead of being traced here.
+    pub fn run_with(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+        given: Option<&[(Vec<transport::Estimate>, f64)]>,
+    ) -> Result<StageOutcome, StageError> {
         let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
         let out_name = if self.output.is_empty() { id.to_string() } else { self.output.clone() };
         let dir = ctx.out_dir.join(&out_name);
@@ -260,14 +288,30 @@ impl BakeLightmaps {
         let mut modes = Vec::new();
         let check_points = report::subset(&atlas, self.reference_texels as usize);
         let mut check_modes: Vec<(BakeMode, Vec<[f64; 3]>)> = Vec::new();
-        for &mode in &self.modes {
-            let opts = self.transport_options(mode);
-            let tr = Transport::new(&scene, &bvh, table.as_ref(), opts)
-                .map_err(|e| fail(e.to_string(), "check the table"))?;
-            let t0 = Instant::now();
-            let est = bake_points(&tr, &points, ctx.progress, &format!("{id} {}", mode.name()))
-                .map_err(|e| fail(e.to_string(), "check the table's g range against the scene's media"))?;
-            let trace_ms = ms(t0);
+        for (mi, &mode) in self.modes.iter().enumerate() {
+            let (est, trace_ms) = match given {
+                Some(given) => {
+                    let Some((est, ms)) = given.get(mi) else {
+                        return Err(fail(format!("no estimates for mode {}", mode.name()), "report this bug"));
+                    };
+                    if est.len() != points.len() {
+                        return Err(fail(
+                            format!("{} estimates for {} texels in mode {}", est.len(), points.len(), mode.name()),
+                            "rerun the bake tiles for this scene",
+                        ));
+                    }
+                    (est.clone(), *ms)
+                }
+                None => {
+                    let opts = self.transport_options(mode);
+                    let tr = Transport::new(&scene, &bvh, table.as_ref(), opts)
+                        .map_err(|e| fail(e.to_string(), "check the table"))?;
+                    let t0 = Instant::now();
+                    let est = bake_points(&tr, &points, ctx.progress, &format!("{id} {}", mode.name()))
+                        .map_err(|e| fail(e.to_string(), "check the table's g range against the scene's media"))?;
+                    (est, ms(t0))
+                }
+            };
             if self.reference_texels > 0 {
                 let by_cell: std::collections::HashMap<u64, [f64; 3]> =
                     points.iter().zip(&est).map(|(p, e)| (p.cell, e.irradiance)).collect();
@@ -522,13 +566,7 @@ impl BakeLightmaps {
         let table = self.open_table(id, ctx, &scene)?;
         let table_ms = if table.is_some() { ms(t0) } else { 0.0 };
         let t0 = Instant::now();
-        let atlas_opts = atlas::AtlasOptions {
-            texels_per_metre: self.texels_per_metre,
-            min_size: self.min_size,
-            max_size: self.max_size,
-            padding: 2,
-        };
-        let atlas = atlas::build(&scene, &atlas_opts)
+        let atlas = atlas::build(&scene, &self.atlas_options())
             .map_err(|e| fail(e.to_string(), "add lightmap UVs to the scene's meshes"))?;
         let points = atlas
             .texels
@@ -542,6 +580,15 @@ impl BakeLightmaps {
             .collect();
         let atlas_ms = ms(t0);
         Ok(Prepared { scene, bvh, table, atlas, points, import_ms, bvh_ms, table_ms, atlas_ms })
+    }
+
+    fn atlas_options(&self) -> atlas::AtlasOptions {
+        atlas::AtlasOptions {
+            texels_per_metre: self.texels_per_metre,
+            min_size: self.min_size,
+            max_size: self.max_size,
+            padding: 2,
+        }
     }
 
     /// The transport options of `mode`.
@@ -750,6 +797,44 @@ fn probe_container(
         .map(|e| e.bytes)
         .map_err(|e| e.to_string())
 }
+
+/// A bake prepared for its tiles ([`BakeLightmaps::tile_baker`]).
+pub struct TileBaker<'a> {
+    stage: &'a BakeLightmaps,
+    id: String,
+    prepared: Prepared,
+}
+
+impl TileBaker<'_> {
+    /// Texels of the atlas.
+    pub fn texels(&self) -> usize {
+        self.prepared.points.len()
+    }
+
+    /// The estimates of tile `tile` (texels `tile × TILE_TEXELS …`, in atlas order) of mode
+    /// `modes[mode]`: a work unit of a farm bake. Every texel draws from its own stream (keyed by its
+    /// atlas pixel), so the tiles of all texels are the bake's estimates to the bit.
+    pub fn bake(&self, mode: usize, tile: usize) -> Result<Vec<transport::Estimate>, StageError> {
+        let fail =
+            |message: String, help: &str| StageError::Input { stage: self.id.clone(), message, help: help.into() };
+        let Some(&m) = self.stage.modes.get(mode) else {
+            return Err(fail(
+                format!("mode {mode} out of range ({} modes)", self.stage.modes.len()),
+                "report this bug",
+            ));
+        };
+        let p = &self.prepared;
+        let start = tile.saturating_mul(TILE_TEXELS).min(p.points.len());
+        let end = (start + TILE_TEXELS).min(p.points.len());
+        let tr = Transport::new(&p.scene, &p.bvh, p.table.as_ref(), self.stage.transport_options(m))
+            .map_err(|e| fail(e.to_string(), "check the table"))?;
+        bake_points(&tr, &p.points[start..end], false, "")
+            .map_err(|e| fail(e.to_string(), "check the table's g range against the scene's media"))
+    }
+}
+
+/// Texels per work unit of a farm bake (`voltab run --shard`).
+pub const TILE_TEXELS: usize = 1024;
 
 fn ms(t0: Instant) -> f64 {
     t0.elapsed().as_secs_f64() * 1e3

@@ -74,7 +74,7 @@ pub struct TransportOptions {
 }
 
 /// The irradiance at one receiver.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Estimate {
     /// Irradiance per channel \[W/m²\].
     pub irradiance: [f64; 3],
