@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# A sharded compile on a real Slurm (issue 38): brings up a one-node cluster on localhost
+# A sharded compile and bake on a real Slurm (issue 38): brings up a one-node cluster on localhost
 # (scripts/slurm-local.sh: Debian's slurm-wlm and munge, installed when missing), submits
-# `voltab slurm … --shards 4 --submit` for a small pipeline holding one table of each kind, SIGKILLs
-# one array task mid-way, resubmits (only the killed shard reruns; the stuck merge is cancelled and
-# replaced), waits for the merge job and checks every merged table is byte-identical to a local compile.
+# `voltab slurm … --shards 4 --submit` for a small pipeline holding one table of each kind and one
+# lightmap bake, SIGKILLs one compile task mid-way, resubmits (only the killed shard reruns; the stuck
+# merge, bake array and bake merge are cancelled and replaced), waits for the bake merge job and checks
+# every merged table, lightmap and probe file is byte-identical to a local `voltab run`.
 # Stops the daemons it started (by pid) and removes its scratch folder. Takes about a minute.
 # Usage: scripts/slurm-test.sh          (VOLTAB_BIN=path/to/voltab to test another build)
 set -euo pipefail
@@ -30,8 +31,8 @@ trap cleanup EXIT
 eval "$(scripts/slurm-local.sh start "$state")"
 export SLURM_CONF
 
-say "local compile (the bytes every merge must reproduce)"
-"$voltab" compile "$pipeline" --out "$work/local" >/dev/null
+say "local run (the bytes every merge must reproduce)"
+"$voltab" run "$pipeline" --out "$work/local" >/dev/null
 
 # Waits until job $1 has left the queue (bounded).
 wait_gone() {
@@ -42,7 +43,7 @@ wait_gone() {
   fail "job $1 still queued after 300 s"
 }
 
-say "submit 4 shards + merge"
+say "submit 4 shards + merge, 4 bake shards + merge"
 first=$("$voltab" slurm "$pipeline" --shards 4 --out "$out" --submit)
 echo "$first"
 array=$(sed -n 's/^submitted array job \([0-9]*\).*/\1/p' <<<"$first")
@@ -77,10 +78,16 @@ second=$("$voltab" slurm "$pipeline" --shards 4 --out "$out" --submit)
 echo "$second"
 grep -q "1 of 4 shards pending: \[$task\]" <<<"$second" || fail "expected only shard $task to be resubmitted"
 merge2=$(sed -n 's/^submitted merge job \([0-9]*\).*/\1/p' <<<"$second")
-[ -n "$merge2" ] || fail "no merge job in: $second"
+bake2=$(sed -n 's/^submitted bake merge job \([0-9]*\).*/\1/p' <<<"$second")
+[ -n "$merge2" ] && [ -n "$bake2" ] || fail "no merge or bake merge job in: $second"
+grep -q "4 of 4 bake shards pending" <<<"$second" || fail "expected all 4 bake shards to be submitted"
+grep -q "cancelled the pending job" <<<"$second" || fail "expected the stuck jobs of the first submission to be cancelled"
 wait_gone "$merge2"
+wait_gone "$bake2"
 cat "$out/slurm/logs/compile-$task.log"
 cat "$out/slurm/logs/merge.log"
+cat "$out/slurm/logs/bake-0.log"
+cat "$out/slurm/logs/merge-bake.log"
 
 say "byte identity with the local compile"
 n=0
@@ -89,4 +96,10 @@ for f in "$work/local"/*.vtab; do
   n=$((n + 1))
 done
 [ "$n" -eq 4 ] || fail "expected 4 tables, compared $n"
-say "PASSED: $n tables byte-identical after a killed task and a resubmission"
+m=0
+for f in "$work/local"/farm_bake/*.exr "$work/local"/farm_bake/*.png "$work/local"/farm_bake/probes.vtab; do
+  cmp "$f" "$out/farm_bake/$(basename "$f")" || fail "farm_bake/$(basename "$f") differs from the local run"
+  m=$((m + 1))
+done
+[ "$m" -eq 7 ] || fail "expected 3 lightmaps as EXR and PNG and the probes, compared $m"
+say "PASSED: $n tables and $m bake outputs byte-identical after a killed task and a resubmission"

@@ -23,8 +23,8 @@
 //! - [`cache`]: content keys, atomic writes, the locked output folder.
 //! - [`compile`]: parallel, incremental compilation with progress and sidecars.
 //! - [`plan`]: (pipeline, scenes) → the tables and slices the scenes need.
-//! - [`shard`]: scale-out: a compile split into work units over N shards (Slurm job arrays), and the
-//!   merge that writes the bytes one machine writes.
+//! - [`shard`]: scale-out: a compile split into work units and a lightmap bake into texel tiles over
+//!   N shards (Slurm job arrays), and the merges that write the bytes one machine writes.
 //! - [`stages`]: consumers of tables, one folder per technique (`bake`, `god_rays`, `image_fog`,
 //!   `pop`, `translucent`, plus `plot_phase`): the stage, its algorithm, its GPU twin and shaders.
 //! - [`render`]: the floor under the techniques: images, camera, G-buffer, luminance, optics, GPU context.

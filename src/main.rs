@@ -811,9 +811,12 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 voltab::shard::slurm::SlurmOptions { shards, partition, time, out, scenes: scene, cpus_per_task };
             let job = voltab::shard::slurm::write_and_submit(&p, &exe, &opts, submit)?;
             println!("wrote {} and {}", job.array_script.display(), job.merge_script.display());
+            if let Some(b) = &job.bake {
+                println!("wrote {} and {}", b.array_script.display(), b.merge_script.display());
+            }
             if submit {
-                if let Some(id) = &job.cancelled {
-                    println!("cancelled the pending merge job {id} of the earlier submission");
+                for id in &job.cancelled {
+                    println!("cancelled the pending job {id} of the earlier submission");
                 }
                 match &job.array_job {
                     Some(id) => println!(
@@ -826,13 +829,34 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 if let Some(id) = &job.merge_job {
                     println!("submitted merge job {id}");
                 }
+                if let Some(b) = &job.bake {
+                    match &b.array_job {
+                        Some(id) => println!(
+                            "submitted bake array job {id} ({} of {shards} bake shards pending: {:?})",
+                            b.pending.len(),
+                            b.pending
+                        ),
+                        None => println!("all {shards} bake shards are finished: only the bake merge is submitted"),
+                    }
+                    if let Some(id) = &b.merge_job {
+                        println!("submitted bake merge job {id}");
+                    }
+                }
             } else {
                 println!(
-                    "submit with: jid=$(sbatch --parsable --array=0-{} {}) && sbatch --dependency=afterok:$jid {}",
+                    "submit with: jid=$(sbatch --parsable --array=0-{} {}) && mid=$(sbatch --parsable --dependency=afterok:$jid {})",
                     shards.saturating_sub(1),
                     job.array_script.display(),
                     job.merge_script.display()
                 );
+                if let Some(b) = &job.bake {
+                    println!(
+                        "  then: bid=$(sbatch --parsable --dependency=afterok:$mid --array=0-{} {}) && sbatch --dependency=afterok:$bid {}",
+                        shards.saturating_sub(1),
+                        b.array_script.display(),
+                        b.merge_script.display()
+                    );
+                }
             }
         }
         Command::Compile { pipeline, out, only, jobs, json, scene, shard: None } => {
@@ -980,16 +1004,42 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             let mut rows = Vec::new();
             if shards {
                 let p = load(&pipeline)?;
-                let (text, r) = voltab::shard::bench::run(&p, &only, &|m| {
-                    if progress {
-                        eprintln!("{m}");
+                let is_stage = |o: &String| p.stages().iter().any(|s| s.id() == o.as_str());
+                let (stage_only, table_only): (Vec<String>, Vec<String>) = only.iter().cloned().partition(is_stage);
+                if only.is_empty() || !table_only.is_empty() {
+                    let (text, r) = voltab::shard::bench::run(&p, &table_only, &|m| {
+                        if progress {
+                            eprintln!("{m}");
+                        }
+                    })
+                    .map_err(|e| anyhow::anyhow!(e))?;
+                    if !json {
+                        print!("{text}");
                     }
-                })
-                .map_err(|e| anyhow::anyhow!(e))?;
-                if !json {
-                    print!("{text}");
+                    rows.extend(r);
                 }
-                rows.extend(r);
+                // The lightmap bakes as tiles (their tables compiled into --tables first).
+                if (only.is_empty() || !stage_only.is_empty())
+                    && let Some(p) = compiled_for_stages(&pipeline, &tables, progress)?
+                {
+                    let base = base_dir(&p);
+                    let ctx = voltab::stages::StageContext {
+                        out_dir: &tables,
+                        base_dir: &base,
+                        progress: false,
+                        device: &cpu_device,
+                    };
+                    let (text, r) = voltab::shard::bench::bake(&p, &ctx, &stage_only, &|m| {
+                        if progress {
+                            eprintln!("{m}");
+                        }
+                    })
+                    .map_err(|e| anyhow::anyhow!(e))?;
+                    if !json {
+                        print!("{text}");
+                    }
+                    rows.extend(r);
+                }
             } else if gpu {
                 let (device, message) = voltab::render::gpu::select(voltab::render::gpu::DeviceRequest::Gpu)
                     .map_err(|e| anyhow::anyhow!(e))?;

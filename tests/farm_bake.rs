@@ -171,3 +171,28 @@ fn bake_shards_out_of_order_mixed_missing_or_stale_are_named() {
     let e = text(merge_bake(&p9, &dirs, &ctx(&farm, &base)).unwrap_err());
     assert!(e.contains("stale"), "{e}");
 }
+
+/// `voltab slurm` on a pipeline that bakes: a second array of bake tiles after the table merge, and
+/// its merge; `voltab run --shard` without `--tables` is refused by the command line.
+#[test]
+fn the_cli_writes_the_bake_phase_and_refuses_a_shard_without_tables() {
+    let d = common::tempdir();
+    let f = fixture();
+    let pipe = f.to_str().unwrap();
+    let out = d.path().join("farm");
+    let o = common::run(&["slurm", pipe, "--shards", "3", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", common::text(&o));
+    let bake = std::fs::read_to_string(out.join("slurm/bake.sbatch")).unwrap();
+    let merge = std::fs::read_to_string(out.join("slurm/merge-bake.sbatch")).unwrap();
+    for want in ["VOLTAB_SHARD_COUNT=3", " run ", "--shard auto", "--tables", "shards/bake-\"$SLURM_ARRAY_TASK_ID\""] {
+        assert!(bake.contains(want), "{want} in\n{bake}");
+    }
+    for i in 0..3 {
+        assert!(merge.contains(&format!("shards/bake-{i}'")), "bake shard {i} in\n{merge}");
+    }
+    let text = common::text(&o);
+    assert!(text.contains("bake.sbatch") && text.contains("--dependency=afterok:$mid"), "{text}");
+    let o = common::run(&["run", pipe, "--shard", "0/2", "--out", d.path().join("s").to_str().unwrap()]);
+    assert!(!o.status.success() && common::text(&o).contains("--tables"), "{}", common::text(&o));
+    assert!(!d.path().join("s").exists());
+}

@@ -199,3 +199,120 @@ pub fn run(p: &ValidatedPipeline, only: &[String], say: &dyn Fn(&str)) -> Result
     }
     Ok((text, rows))
 }
+
+/// `voltab bench --shards` for the lightmap bakes of `p` (tables read from `ctx.out_dir`; outputs
+/// written there): each bake run whole as `voltab run` runs it, then as its tiles one by one (one
+/// preparation — scene, BVH, table, atlas — as a bake task does once) plus the merge that finishes it
+/// (reads the tiles, dilates, writes, checks against path tracing, bakes the probes), with the
+/// lightmaps of both compared byte for byte and the wall time projected as for tables (every node
+/// prepares once).
+pub fn bake(
+    p: &ValidatedPipeline,
+    ctx: &crate::stages::StageContext,
+    only: &[String],
+    say: &dyn Fn(&str),
+) -> Result<(String, Vec<BenchRow>), String> {
+    use crate::stages::StageDef;
+    let (units, _) = super::bake::bake_units(p, ctx).map_err(|e| e.to_string())?;
+    let mut text = String::new();
+    let mut rows = Vec::new();
+    for (si, s) in p.stages().iter().enumerate() {
+        let StageDef::BakeLightmaps(b) = s.def() else { continue };
+        if !only.is_empty() && !only.iter().any(|o| o == s.id()) {
+            continue;
+        }
+        let id = s.id();
+        let dir = ctx.out_dir.join(if b.output.is_empty() { id } else { &b.output });
+        let lightmaps = || -> Vec<(String, Vec<u8>)> {
+            let mut v: Vec<(String, Vec<u8>)> = b
+                .modes
+                .iter()
+                .flat_map(|m| ["exr", "png"].map(|x| format!("lightmap_{}.{x}", m.name())))
+                .chain(std::iter::once("probes.vtab".to_string()))
+                .filter_map(|n| std::fs::read(dir.join(&n)).ok().map(|bytes| (n, bytes)))
+                .collect();
+            v.sort();
+            v
+        };
+        say(&format!("{id}: the whole bake, as voltab run runs it"));
+        let t0 = Instant::now();
+        b.run(id, ctx).map_err(|e| e.to_string())?;
+        let whole_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let want = lightmaps();
+        say(&format!("{id}: its tiles one by one"));
+        let t1 = Instant::now();
+        let tb = b.tile_baker(id, ctx).map_err(|e| e.to_string())?;
+        let prepare_ms = t1.elapsed().as_secs_f64() * 1e3;
+        let texels = tb.texels();
+        let mine: Vec<&Unit> = units.iter().filter(|u| u.table == si).collect();
+        let tiles = mine.len() / b.modes.len().max(1);
+        let mut unit_ms = Vec::with_capacity(mine.len());
+        let mut encoded = Vec::with_capacity(mine.len());
+        for u in &mine {
+            let k = u.part.unwrap_or(0);
+            let t = Instant::now();
+            let estimates = tb.bake(k / tiles.max(1), k % tiles.max(1)).map_err(|e| e.to_string())?;
+            encoded.push(encode_part(&Payload::Texels { estimates, ms: 0.0 }));
+            unit_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        drop(tb);
+        say(&format!("{id}: the merge"));
+        let t2 = Instant::now();
+        let mut given = vec![(Vec::new(), 0.0); b.modes.len()];
+        for (u, bytes) in mine.iter().zip(&encoded) {
+            let k = u.part.unwrap_or(0);
+            match decode_part(bytes)? {
+                Payload::Texels { estimates, .. } => given[k / tiles.max(1)].0.extend(estimates),
+                _ => return Err(format!("unit {} holds no texels", u.name)),
+            }
+        }
+        let read_ms = t2.elapsed().as_secs_f64() * 1e3;
+        b.run_with(id, ctx, Some(&given)).map_err(|e| e.to_string())?;
+        let merge_ms = t2.elapsed().as_secs_f64() * 1e3;
+        let identical = lightmaps() == want;
+        let units_ms: f64 = unit_ms.iter().sum();
+        let overhead = (prepare_ms + units_ms + merge_ms) / whole_ms - 1.0;
+        let n = unit_ms.len();
+        text.push_str(&format!(
+            "{id} (BakeLightmaps, {} texels × {} modes): {n} tiles of {} texels\n  whole bake             {whole_ms:>10.0} ms (trace every mode, write, check against path tracing, probes)\n  preparation            {prepare_ms:>10.0} ms (scene, BVH, table slices, atlas: once per bake task)\n  tiles one by one       {units_ms:>10.0} ms (sum; largest {:.0} ms, mean {:.0} ms)\n  merge                  {merge_ms:>10.0} ms ({:.2} % of the whole bake; {read_ms:.0} ms reading the tiles, the rest finishes the bake as the whole run does)\n  sharding overhead      {:>+10.2} % of the whole bake (preparation + tiles + merge − whole)\n  lightmaps and probes   {}\n",
+            texels,
+            b.modes.len(),
+            crate::stages::bake::TILE_TEXELS,
+            unit_ms.iter().copied().fold(0.0, f64::max),
+            units_ms / n.max(1) as f64,
+            100.0 * merge_ms / whole_ms,
+            100.0 * overhead,
+            if identical { "identical to the whole bake" } else { "DIFFER from the whole bake" },
+        ));
+        rows.push(BenchRow {
+            what: format!("{id}: whole vs {n} tiles + merge"),
+            baseline_ms: whole_ms,
+            candidate_ms: prepare_ms + units_ms + merge_ms,
+            speedup: whole_ms / (prepare_ms + units_ms + merge_ms),
+            note: format!(
+                "merge {:.2} % of whole; lightmaps {}",
+                100.0 * merge_ms / whole_ms,
+                if identical { "identical" } else { "DIFFER" }
+            ),
+        });
+        text.push_str(
+            "  projected wall time (node = this machine; longest-first; + preparation + merge + 1 s task start):\n",
+        );
+        for k in [1usize, 8, 64, 512] {
+            let wall = makespan(&unit_ms, k) + prepare_ms + merge_ms + TASK_START_S * 1e3;
+            text.push_str(&format!(
+                "    {k:>4} nodes {:>10.1} s  ({:.1}× the whole bake)\n",
+                wall / 1e3,
+                whole_ms / wall
+            ));
+            rows.push(BenchRow {
+                what: format!("{id}: projected on {k} nodes"),
+                baseline_ms: whole_ms,
+                candidate_ms: wall,
+                speedup: whole_ms / wall,
+                note: "model: longest-first over measured tile times + preparation + merge + 1 s".into(),
+            });
+        }
+    }
+    Ok((text, rows))
+}

@@ -1,5 +1,5 @@
 //! Scale-out: a compile split into deterministic work units over N shards, and a merge that writes the
-//! bytes one machine writes.
+//! bytes one machine writes; lightmap bakes split into texel tiles the same way ([`bake`]).
 //!
 //! Input: a [`ValidatedPipeline`] and a [`ShardSpec`] (`--shard I/N`, or `auto` from Slurm's or
 //! Kubernetes' job-array variables). Output: a self-describing shard folder — `shard.json` (the

@@ -1,18 +1,23 @@
-//! `voltab slurm`: a sharded compile as a Slurm job array plus a merge job that depends on it.
+//! `voltab slurm`: a sharded compile as a Slurm job array plus a merge job that depends on it, and
+//! for pipelines with lightmap bakes a second array of bake tiles plus its merge.
 //!
 //! Input: a pipeline, the shard count N, an output folder on storage every node sees, and optional
 //! partition / time limit. Output: `<out>/slurm/compile.sbatch` (an array `0..N-1`, each task
 //! `voltab compile --shard auto` into `<out>/shards/compile-<i>`), `<out>/slurm/merge.sbatch`
-//! (`voltab merge` of those folders into `<out>`), and with `submit` the two jobs submitted with
-//! `sbatch --parsable`, the merge held by `--dependency=afterok:<array job>`. A resubmission submits
-//! only the tasks whose shard folder has no finished manifest for this pipeline (a task killed
-//! mid-way reuses its finished units), so only missing work is redone.
+//! (`voltab merge` of those folders into `<out>`), and when the pipeline bakes lightmaps
+//! `bake.sbatch` (each task `voltab run --shard auto --tables <out>` into `<out>/shards/bake-<i>`)
+//! and `merge-bake.sbatch` (`voltab merge` of the bake shards: runs every stage into `<out>`). With
+//! `submit` the jobs are submitted with `sbatch --parsable`, each held by `--dependency=afterok` on
+//! the one before. A resubmission submits only the tasks whose shard folder has no finished manifest
+//! for this pipeline (a task killed mid-way reuses its finished units) and cancels the still-pending
+//! downstream jobs of the earlier submission (their dependency failed), so only missing work is redone.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use super::{MANIFEST, ShardError, ShardSpec, pipeline_key, read_manifest};
+use super::{Job, MANIFEST, ShardError, ShardSpec, pipeline_key, read_manifest};
 use crate::pipeline::ValidatedPipeline;
+use crate::stages::{StageContext, StageDef};
 
 /// What to write.
 #[derive(Debug, Clone)]
@@ -44,8 +49,25 @@ pub struct SlurmJob {
     pub array_job: Option<String>,
     /// Job id of the merge.
     pub merge_job: Option<String>,
-    /// A pending merge of an earlier submission, cancelled (its array had failed).
-    pub cancelled: Option<String>,
+    /// Pending jobs of an earlier submission, cancelled (a job they depended on had failed).
+    pub cancelled: Vec<String>,
+    /// The bake phase, when the pipeline bakes lightmaps.
+    pub bake: Option<BakePhase>,
+}
+
+/// The bake tiles' array and their merge (`voltab run --shard`, then `voltab merge`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BakePhase {
+    /// The array script.
+    pub array_script: PathBuf,
+    /// The merge script.
+    pub merge_script: PathBuf,
+    /// Shard indices still to compute.
+    pub pending: Vec<u32>,
+    /// Job id of the array (None when nothing was pending or not submitted).
+    pub array_job: Option<String>,
+    /// Job id of the merge.
+    pub merge_job: Option<String>,
 }
 
 fn quote(p: &Path) -> String {
@@ -57,20 +79,33 @@ fn absolute(p: &Path) -> PathBuf {
     std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
 }
 
-/// The shard folder of task `i`.
+/// The compile shard folder of task `i`.
 pub fn shard_dir(out: &Path, i: u32) -> PathBuf {
-    out.join("shards").join(format!("compile-{i}"))
+    job_dir(out, Job::Compile, i)
 }
 
-/// Indices whose shard folder holds no finished manifest of this pipeline.
+/// The shard folder of task `i` of `job`.
+pub fn job_dir(out: &Path, job: Job, i: u32) -> PathBuf {
+    let name = match job {
+        Job::Compile => "compile",
+        Job::Bake => "bake",
+    };
+    out.join("shards").join(format!("{name}-{i}"))
+}
+
+/// Indices whose compile shard folder holds no finished manifest of this pipeline.
 pub fn pending_shards(p: &ValidatedPipeline, out: &Path, shards: u32) -> Vec<u32> {
-    let key = pipeline_key(p);
+    pending_of(out, Job::Compile, &pipeline_key(p), shards)
+}
+
+fn pending_of(out: &Path, job: Job, key: &str, shards: u32) -> Vec<u32> {
     (0..shards)
         .filter(|&i| {
-            let d = shard_dir(out, i);
+            let d = job_dir(out, job, i);
             !(d.join(MANIFEST).is_file()
-                && read_manifest(&d)
-                    .is_ok_and(|m| m.pipeline_key == key && m.shard == ShardSpec { index: i, count: shards }))
+                && read_manifest(&d).is_ok_and(|m| {
+                    m.job == job && m.pipeline_key == key && m.shard == ShardSpec { index: i, count: shards }
+                }))
         })
         .collect()
 }
@@ -157,42 +192,109 @@ pub fn write_and_submit(
     write(&array_script, &array)?;
     write(&merge_script, &merge)?;
     let pending = pending_shards(p, &out, n);
+    // The bake phase: tiles of the pipeline's lightmap bakes, read from the merged tables.
+    let bake = if p.stages().iter().any(|s| matches!(s.def(), StageDef::BakeLightmaps(_))) {
+        let base = p.path().parent().map(Path::to_path_buf).unwrap_or_default();
+        let device = crate::render::gpu::Device::Cpu;
+        let ctx = StageContext { out_dir: &out, base_dir: &base, progress: false, device: &device };
+        let (_, key) = super::bake::bake_units(p, &ctx)?;
+        let bake_script = dir.join("bake.sbatch");
+        let bake_array = format!(
+            "#!/bin/bash\n\
+             # Written by `voltab slurm`: bake shard $SLURM_ARRAY_TASK_ID of {n} of {pipeline}'s lightmaps,\n\
+             # after the tables are merged into {out}.\n\
+             #SBATCH --job-name=voltab-bake\n\
+             #SBATCH --output={logs}/bake-%a.log\n\
+             {head}\
+             set -euo pipefail\n\
+             export VOLTAB_SHARD_COUNT={n}\n\
+             exec {voltab} run {pipe}{scenes} --shard auto --tables {out_q} --out {out_q}/shards/bake-\"$SLURM_ARRAY_TASK_ID\"\n",
+            pipeline = pipeline.display(),
+            out = out.display(),
+            logs = logs.display(),
+            voltab = quote(&voltab),
+            pipe = quote(&pipeline),
+            out_q = quote(&out),
+        );
+        let merge_bake_script = dir.join("merge-bake.sbatch");
+        let bake_shards: Vec<String> = (0..n).map(|i| quote(&job_dir(&out, Job::Bake, i))).collect();
+        let merge_bake = format!(
+            "#!/bin/bash\n\
+             # Written by `voltab slurm`: merges the {n} bake shards and runs the stages into {out}.\n\
+             #SBATCH --job-name=voltab-merge-bake\n\
+             #SBATCH --output={logs}/merge-bake.log\n\
+             {head}\
+             set -euo pipefail\n\
+             exec {voltab} merge {shards} --out {out_q}\n",
+            out = out.display(),
+            logs = logs.display(),
+            voltab = quote(&voltab),
+            shards = bake_shards.join(" "),
+            out_q = quote(&out),
+        );
+        write(&bake_script, &bake_array)?;
+        write(&merge_bake_script, &merge_bake)?;
+        Some(BakePhase {
+            array_script: bake_script,
+            merge_script: merge_bake_script,
+            pending: pending_of(&out, Job::Bake, &key, n),
+            array_job: None,
+            merge_job: None,
+        })
+    } else {
+        None
+    };
     let mut job = SlurmJob {
         array_script,
         merge_script,
         pending: pending.clone(),
         array_job: None,
         merge_job: None,
-        cancelled: None,
+        cancelled: Vec::new(),
+        bake,
     };
     if !submit {
         return Ok(job);
     }
-    // A merge left from an earlier submission waits forever on its failed array (afterok can no longer
-    // be satisfied): cancel it while it is still pending, and submit a new one.
-    let jobid_file = dir.join("merge.jobid");
-    if let Ok(old) = std::fs::read_to_string(&jobid_file) {
-        let old = old.trim();
-        if !old.is_empty() && old.chars().all(|c| c.is_ascii_digit()) {
-            let pending = Command::new("squeue")
-                .args(["-h", "-t", "PENDING", "-o", "%i", "-j", old])
-                .output()
-                .is_ok_and(|o| o.status.success() && !String::from_utf8_lossy(&o.stdout).trim().is_empty());
-            if pending {
-                let _ = Command::new("scancel").arg(old).status();
-                job.cancelled = Some(old.to_string());
-            }
+    // Jobs left pending by an earlier submission wait forever on a failed dependency (afterok can no
+    // longer be satisfied): cancel them while they are still pending, and submit new ones.
+    let jobids_file = dir.join("jobs.pending");
+    let earlier = std::fs::read_to_string(&jobids_file)
+        .or_else(|_| std::fs::read_to_string(dir.join("merge.jobid")))
+        .unwrap_or_default();
+    for old in earlier.split_whitespace().filter(|id| id.chars().all(|c| c.is_ascii_digit())) {
+        let pending = Command::new("squeue")
+            .args(["-h", "-t", "PENDING", "-o", "%i", "-j", old])
+            .output()
+            .is_ok_and(|o| o.status.success() && !String::from_utf8_lossy(&o.stdout).trim().is_empty());
+        if pending {
+            let _ = Command::new("scancel").arg(old).status();
+            job.cancelled.push(old.to_string());
         }
     }
-    let array_job = if pending.is_empty() {
-        None
-    } else {
-        let list = pending.iter().map(u32::to_string).collect::<Vec<_>>().join(",");
-        Some(sbatch(&[format!("--array={list}")], &job.array_script)?)
-    };
-    let dep: Vec<String> = array_job.iter().map(|id| format!("--dependency=afterok:{id}")).collect();
-    let merge_job = sbatch(&dep, &job.merge_script)?;
-    crate::cache::write_atomic(&jobid_file, merge_job.as_bytes())?;
+    let after =
+        |id: &Option<String>| -> Vec<String> { id.iter().map(|id| format!("--dependency=afterok:{id}")).collect() };
+    let array_list =
+        |pending: &[u32]| format!("--array={}", pending.iter().map(u32::to_string).collect::<Vec<_>>().join(","));
+    let array_job = if pending.is_empty() { None } else { Some(sbatch(&[array_list(&pending)], &job.array_script)?) };
+    let merge_job = sbatch(&after(&array_job), &job.merge_script)?;
+    let mut downstream = vec![merge_job.clone()];
+    if let Some(b) = job.bake.as_mut() {
+        let merge = Some(merge_job.clone());
+        let bake_array = if b.pending.is_empty() {
+            None
+        } else {
+            let mut args = after(&merge);
+            args.push(array_list(&b.pending));
+            Some(sbatch(&args, &b.array_script)?)
+        };
+        let bake_merge = sbatch(&after(if bake_array.is_some() { &bake_array } else { &merge }), &b.merge_script)?;
+        downstream.extend(bake_array.iter().cloned());
+        downstream.push(bake_merge.clone());
+        b.array_job = bake_array;
+        b.merge_job = Some(bake_merge);
+    }
+    crate::cache::write_atomic(&jobids_file, format!("{}\n", downstream.join(" ")).as_bytes())?;
     job.merge_job = Some(merge_job);
     job.array_job = array_job;
     Ok(job)
