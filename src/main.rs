@@ -544,6 +544,24 @@ fn compiled_for_stages(pipeline: &Path, tables: &Path, progress: bool) -> Result
     Ok(Some(p))
 }
 
+/// What a shard task did: one line, or JSON.
+fn print_shard(what: &str, units: &str, s: &voltab::shard::ShardSummary, json: bool) -> Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(s)?);
+    } else {
+        println!(
+            "{what} {}: {} of {} {units} computed, {} reused from an earlier attempt, in {:.0} ms → {}",
+            s.shard,
+            s.computed.len(),
+            s.units_total,
+            s.reused.len(),
+            s.total_ms,
+            s.dir.display()
+        );
+    }
+    Ok(())
+}
+
 /// The folder relative stage paths resolve against: the pipeline file's.
 fn base_dir(p: &ValidatedPipeline) -> PathBuf {
     p.path().parent().map(Path::to_path_buf).unwrap_or_default()
@@ -677,19 +695,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 Some(j) => rayon::ThreadPoolBuilder::new().num_threads(j).build()?.install(run)?,
                 None => run()?,
             };
-            if json {
-                println!("{}", serde_json::to_string_pretty(&s)?);
-            } else {
-                println!(
-                    "bake shard {}: {} of {} tiles computed, {} reused from an earlier attempt, in {:.0} ms → {}",
-                    s.shard,
-                    s.computed.len(),
-                    s.units_total,
-                    s.reused.len(),
-                    s.total_ms,
-                    s.dir.display()
-                );
-            }
+            print_shard("bake shard", "tiles", &s, json)?;
         }
         Command::Run { pipeline, out, jobs, json, scene, device, .. } => {
             let p = planned(load(&pipeline)?, &scene, json)?;
@@ -748,19 +754,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             let spec = voltab::shard::ShardSpec::parse(&shard, &|k| std::env::var(k).ok())?;
             let p = planned(load(&pipeline)?, &scene, true)?;
             let s = voltab::shard::compile_shard(&p, &scene, spec, &out, jobs, progress)?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&s)?);
-            } else {
-                println!(
-                    "shard {}: {} of {} units computed, {} reused from an earlier attempt, in {:.0} ms → {}",
-                    s.shard,
-                    s.computed.len(),
-                    s.units_total,
-                    s.reused.len(),
-                    s.total_ms,
-                    s.dir.display()
-                );
-            }
+            print_shard("shard", "units", &s, json)?;
         }
         Command::Merge { shards, out, pipeline, json, device } => {
             let first = voltab::shard::read_manifest(&shards[0])?;
@@ -810,44 +804,33 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             let opts =
                 voltab::shard::slurm::SlurmOptions { shards, partition, time, out, scenes: scene, cpus_per_task };
             let job = voltab::shard::slurm::write_and_submit(&p, &exe, &opts, submit)?;
-            println!("wrote {} and {}", job.array_script.display(), job.merge_script.display());
-            if let Some(b) = &job.bake {
-                println!("wrote {} and {}", b.array_script.display(), b.merge_script.display());
+            let phases = std::iter::once(("", &job.compile)).chain(job.bake.as_ref().map(|b| ("bake ", b)));
+            for (_, ph) in phases.clone() {
+                println!("wrote {} and {}", ph.array_script.display(), ph.merge_script.display());
             }
             if submit {
                 for id in &job.cancelled {
                     println!("cancelled the pending job {id} of the earlier submission");
                 }
-                match &job.array_job {
-                    Some(id) => println!(
-                        "submitted array job {id} ({} of {shards} shards pending: {:?})",
-                        job.pending.len(),
-                        job.pending
-                    ),
-                    None => println!("all {shards} shards are finished: only the merge is submitted"),
-                }
-                if let Some(id) = &job.merge_job {
-                    println!("submitted merge job {id}");
-                }
-                if let Some(b) = &job.bake {
-                    match &b.array_job {
+                for (kind, ph) in phases {
+                    match &ph.array_job {
                         Some(id) => println!(
-                            "submitted bake array job {id} ({} of {shards} bake shards pending: {:?})",
-                            b.pending.len(),
-                            b.pending
+                            "submitted {kind}array job {id} ({} of {shards} {kind}shards pending: {:?})",
+                            ph.pending.len(),
+                            ph.pending
                         ),
-                        None => println!("all {shards} bake shards are finished: only the bake merge is submitted"),
+                        None => println!("all {shards} {kind}shards are finished: only the {kind}merge is submitted"),
                     }
-                    if let Some(id) = &b.merge_job {
-                        println!("submitted bake merge job {id}");
+                    if let Some(id) = &ph.merge_job {
+                        println!("submitted {kind}merge job {id}");
                     }
                 }
             } else {
                 println!(
                     "submit with: jid=$(sbatch --parsable --array=0-{} {}) && mid=$(sbatch --parsable --dependency=afterok:$jid {})",
                     shards.saturating_sub(1),
-                    job.array_script.display(),
-                    job.merge_script.display()
+                    job.compile.array_script.display(),
+                    job.compile.merge_script.display()
                 );
                 if let Some(b) = &job.bake {
                     println!(

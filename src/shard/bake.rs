@@ -20,8 +20,8 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::{
-    Checked, Job, MANIFEST, Manifest, PartEntry, Payload, ShardError, ShardSpec, Unit, assign, check_shards,
-    decode_part, encode_part, pipeline_key,
+    Checked, Job, MANIFEST, Manifest, PartEntry, Payload, ShardError, ShardSpec, ShardSummary, Unit, assign,
+    check_shards, decode_part, encode_part, pipeline_key,
 };
 use crate::cache::{OutputDir, write_atomic};
 use crate::pipeline::ValidatedPipeline;
@@ -76,23 +76,6 @@ fn part_file(key: &str, u: &Unit) -> String {
     format!("{}.part", &h.finalize().to_hex()[..32])
 }
 
-/// What [`bake_shard`] did.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct BakeShardSummary {
-    /// The shard.
-    pub shard: ShardSpec,
-    /// Tiles of the whole job.
-    pub units_total: usize,
-    /// Tiles computed now, with their time \[ms\].
-    pub computed: Vec<(String, f64)>,
-    /// Tiles reused from an earlier attempt.
-    pub reused: Vec<String>,
-    /// Wall time \[ms\].
-    pub total_ms: f64,
-    /// The shard folder.
-    pub dir: PathBuf,
-}
-
 /// Computes shard `spec`'s bake tiles of `p` into the shard folder `dir`, reading the tables from
 /// `ctx.out_dir`. Tiles finished by an earlier attempt are reused; the manifest is written last.
 pub fn bake_shard(
@@ -101,7 +84,7 @@ pub fn bake_shard(
     spec: ShardSpec,
     ctx: &StageContext,
     dir: &Path,
-) -> Result<BakeShardSummary, ShardError> {
+) -> Result<ShardSummary, ShardError> {
     let t0 = Instant::now();
     let (units, key) = bake_units(p, ctx)?;
     let out = OutputDir::open(dir, || {
@@ -168,7 +151,7 @@ pub fn bake_shard(
     };
     let json = serde_json::to_vec_pretty(&manifest).unwrap_or_default();
     write_atomic(&dir.join(MANIFEST), &json)?;
-    Ok(BakeShardSummary {
+    Ok(ShardSummary {
         shard: spec,
         units_total: units.len(),
         computed,

@@ -292,7 +292,7 @@ pub enum ShardError {
     Cache(#[from] CacheError),
 }
 
-/// What [`compile_shard`] did.
+/// What [`compile_shard`] or [`bake::bake_shard`] did.
 #[derive(Debug, Clone, Serialize)]
 pub struct ShardSummary {
     /// The shard.

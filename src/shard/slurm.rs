@@ -39,30 +39,22 @@ pub struct SlurmOptions {
 /// The scripts written and, when submitted, the job ids.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct SlurmJob {
+    /// The table compile: its array and the merge of its shards into the output folder.
+    pub compile: Phase,
+    /// The lightmap bakes' tiles and their merge (which runs the stages), when the pipeline bakes.
+    pub bake: Option<Phase>,
+    /// Pending jobs of an earlier submission, cancelled (a job they depended on had failed).
+    pub cancelled: Vec<String>,
+}
+
+/// One job array and the merge of its shards.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Phase {
     /// The array script.
     pub array_script: PathBuf,
     /// The merge script.
     pub merge_script: PathBuf,
     /// Shard indices still to compute (all of them on a first submission).
-    pub pending: Vec<u32>,
-    /// Job id of the array (None when nothing was pending or not submitted).
-    pub array_job: Option<String>,
-    /// Job id of the merge.
-    pub merge_job: Option<String>,
-    /// Pending jobs of an earlier submission, cancelled (a job they depended on had failed).
-    pub cancelled: Vec<String>,
-    /// The bake phase, when the pipeline bakes lightmaps.
-    pub bake: Option<BakePhase>,
-}
-
-/// The bake tiles' array and their merge (`voltab run --shard`, then `voltab merge`).
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct BakePhase {
-    /// The array script.
-    pub array_script: PathBuf,
-    /// The merge script.
-    pub merge_script: PathBuf,
-    /// Shard indices still to compute.
     pub pending: Vec<u32>,
     /// Job id of the array (None when nothing was pending or not submitted).
     pub array_job: Option<String>,
@@ -234,7 +226,7 @@ pub fn write_and_submit(
         );
         write(&bake_script, &bake_array)?;
         write(&merge_bake_script, &merge_bake)?;
-        Some(BakePhase {
+        Some(Phase {
             array_script: bake_script,
             merge_script: merge_bake_script,
             pending: pending_of(&out, Job::Bake, &key, n),
@@ -245,13 +237,9 @@ pub fn write_and_submit(
         None
     };
     let mut job = SlurmJob {
-        array_script,
-        merge_script,
-        pending: pending.clone(),
-        array_job: None,
-        merge_job: None,
-        cancelled: Vec::new(),
+        compile: Phase { array_script, merge_script, pending: pending.clone(), array_job: None, merge_job: None },
         bake,
+        cancelled: Vec::new(),
     };
     if !submit {
         return Ok(job);
@@ -276,8 +264,9 @@ pub fn write_and_submit(
         |id: &Option<String>| -> Vec<String> { id.iter().map(|id| format!("--dependency=afterok:{id}")).collect() };
     let array_list =
         |pending: &[u32]| format!("--array={}", pending.iter().map(u32::to_string).collect::<Vec<_>>().join(","));
-    let array_job = if pending.is_empty() { None } else { Some(sbatch(&[array_list(&pending)], &job.array_script)?) };
-    let merge_job = sbatch(&after(&array_job), &job.merge_script)?;
+    let array_job =
+        if pending.is_empty() { None } else { Some(sbatch(&[array_list(&pending)], &job.compile.array_script)?) };
+    let merge_job = sbatch(&after(&array_job), &job.compile.merge_script)?;
     let mut downstream = vec![merge_job.clone()];
     if let Some(b) = job.bake.as_mut() {
         let merge = Some(merge_job.clone());
@@ -295,8 +284,8 @@ pub fn write_and_submit(
         b.merge_job = Some(bake_merge);
     }
     crate::cache::write_atomic(&jobids_file, format!("{}\n", downstream.join(" ")).as_bytes())?;
-    job.merge_job = Some(merge_job);
-    job.array_job = array_job;
+    job.compile.merge_job = Some(merge_job);
+    job.compile.array_job = array_job;
     Ok(job)
 }
 
