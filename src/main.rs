@@ -544,6 +544,21 @@ fn compiled_for_stages(pipeline: &Path, tables: &Path, progress: bool) -> Result
     Ok(Some(p))
 }
 
+/// Where the stages of `p` run: the device is opened only when a stage can use it, and the choice
+/// is said once.
+fn stage_device(
+    p: &ValidatedPipeline,
+    request: voltab::render::gpu::DeviceRequest,
+) -> Result<voltab::render::gpu::Device> {
+    if p.stages().iter().any(|s| s.def().uses_device()) {
+        let (d, message) = voltab::render::gpu::select(request).map_err(|e| anyhow::anyhow!(e))?;
+        eprintln!("{message}");
+        Ok(d)
+    } else {
+        Ok(voltab::render::gpu::Device::Cpu)
+    }
+}
+
 /// What a shard task did: one line, or JSON.
 fn print_shard(what: &str, units: &str, s: &voltab::shard::ShardSummary, json: bool) -> Result<()> {
     if json {
@@ -702,14 +717,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             let summary = compile(&p, &CompileOptions { out_dir: out.clone(), only: Vec::new(), jobs, progress })?;
             let mut stage_results = Vec::new();
             let base = base_dir(&p);
-            // The device is opened only when a stage can use it, and the choice is said once.
-            let device = if p.stages().iter().any(|s| s.def().uses_device()) {
-                let (d, message) = voltab::render::gpu::select(device).map_err(|e| anyhow::anyhow!(e))?;
-                eprintln!("{message}");
-                d
-            } else {
-                cpu_device.clone()
-            };
+            let device = stage_device(&p, device)?;
             let ctx = voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress, device: &device };
             for s in p.stages() {
                 let missing: Vec<PathBuf> = s.def().scenes(&base).into_iter().filter(|f| !f.exists()).collect();
@@ -762,13 +770,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
             let p = planned(load(&path)?, &first.scenes, true)?;
             if first.job == voltab::shard::Job::Bake {
                 let base = base_dir(&p);
-                let device = if p.stages().iter().any(|s| s.def().uses_device()) {
-                    let (d, message) = voltab::render::gpu::select(device).map_err(|e| anyhow::anyhow!(e))?;
-                    eprintln!("{message}");
-                    d
-                } else {
-                    cpu_device.clone()
-                };
+                let device = stage_device(&p, device)?;
                 let ctx = voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress, device: &device };
                 let results = voltab::shard::bake::merge_bake(&p, &shards, &ctx)?;
                 if json {

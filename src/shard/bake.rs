@@ -20,8 +20,8 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::{
-    Checked, Job, MANIFEST, Manifest, PartEntry, Payload, ShardError, ShardSpec, ShardSummary, Unit, assign,
-    check_shards, decode_part, encode_part, pipeline_key,
+    Checked, Finished, Job, PartEntry, Payload, ShardError, ShardSpec, ShardSummary, Unit, assign, check_shards,
+    encode_part, pipeline_key, reusable,
 };
 use crate::cache::{OutputDir, write_atomic};
 use crate::pipeline::ValidatedPipeline;
@@ -100,18 +100,9 @@ pub fn bake_shard(
     for u in &mine {
         let file = part_file(&key, u);
         let path = dir.join(&file);
-        let entry = |bytes: &[u8], ms: f64| PartEntry {
-            unit: u.name.clone(),
-            file: file.clone(),
-            blake3: blake3::hash(bytes).to_hex().to_string(),
-            bytes: bytes.len() as u64,
-            ms,
-        };
-        let limit = (TILE_TEXELS as u64) * 64 + (1 << 20);
-        if let Some(bytes) = crate::cache::bounded::read_regular(&path, limit)
-            .ok()
-            .filter(|b| matches!(decode_part(b), Ok(Payload::Texels { .. })))
-        {
+        let entry = |bytes: &[u8], ms: f64| PartEntry::of(&u.name, &file, bytes, ms);
+        // A tile's part: its estimates (40 B a texel), bounded with slack.
+        if let Some(bytes) = reusable(&path, (TILE_TEXELS as u64) * 64 + (1 << 20)) {
             bar.inc(u.cost);
             reused.push(u.name.clone());
             parts.push(entry(&bytes, 0.0));
@@ -138,27 +129,7 @@ pub fn bake_shard(
         parts.push(entry(&bytes, ms));
     }
     bar.finish_and_clear();
-    let manifest = Manifest {
-        format: super::FORMAT,
-        job: Job::Bake,
-        voltab_version: env!("CARGO_PKG_VERSION").into(),
-        pipeline: p.path().to_path_buf(),
-        scenes: scenes.to_vec(),
-        pipeline_key: key,
-        shard: spec,
-        units: units.iter().map(|u| u.name.clone()).collect(),
-        parts,
-    };
-    let json = serde_json::to_vec_pretty(&manifest).unwrap_or_default();
-    write_atomic(&dir.join(MANIFEST), &json)?;
-    Ok(ShardSummary {
-        shard: spec,
-        units_total: units.len(),
-        computed,
-        reused,
-        total_ms: t0.elapsed().as_secs_f64() * 1e3,
-        dir: out.path().to_path_buf(),
-    })
+    Finished { job: Job::Bake, key, units: &units, parts, computed, reused }.write(p, scenes, spec, out.path(), t0)
 }
 
 /// Checks the bake shard folders `dirs` of `p` (as [`super::merge`] checks compile shards), then runs

@@ -42,6 +42,40 @@ fn makespan(costs: &[f64], k: usize) -> f64 {
     load.into_iter().fold(0.0, f64::max)
 }
 
+/// The projected wall time on 1, 8, 64 and 512 nodes: longest-first over the measured `unit_ms`, plus
+/// the `fixed_ms` every run pays once (`fixed`: what it is), plus one task start; as text and rows
+/// against the whole run's `whole_ms`.
+#[allow(clippy::too_many_arguments)]
+fn project(
+    text: &mut String,
+    rows: &mut Vec<BenchRow>,
+    id: &str,
+    whole: &str,
+    whole_ms: f64,
+    unit_ms: &[f64],
+    fixed_ms: f64,
+    fixed: &str,
+) {
+    text.push_str(&format!(
+        "  projected wall time (node = this machine; longest-first; + {fixed} + 1 s task start):\n"
+    ));
+    for k in [1usize, 8, 64, 512] {
+        let wall = makespan(unit_ms, k) + fixed_ms + TASK_START_S * 1e3;
+        text.push_str(&format!(
+            "    {k:>4} nodes {:>10.1} s  ({:.1}× the whole {whole})\n",
+            wall / 1e3,
+            whole_ms / wall
+        ));
+        rows.push(BenchRow {
+            what: format!("{id}: projected on {k} nodes"),
+            baseline_ms: whole_ms,
+            candidate_ms: wall,
+            speedup: whole_ms / wall,
+            note: format!("model: longest-first over measured unit times + {fixed} + 1 s"),
+        });
+    }
+}
+
 /// Runs the benchmark; `say` reports progress.
 pub fn run(p: &ValidatedPipeline, only: &[String], say: &dyn Fn(&str)) -> Result<(String, Vec<BenchRow>), String> {
     let ids: Vec<String> = if only.is_empty() {
@@ -142,22 +176,7 @@ pub fn run(p: &ValidatedPipeline, only: &[String], say: &dyn Fn(&str)) -> Result
                 if identical { "identical" } else { "DIFFER" }
             ),
         });
-        text.push_str("  projected wall time (node = this machine; longest-first; + merge + 1 s task start):\n");
-        for k in [1usize, 8, 64, 512] {
-            let wall = makespan(&unit_ms, k) + merge_ms + TASK_START_S * 1e3;
-            text.push_str(&format!(
-                "    {k:>4} nodes {:>10.1} s  ({:.1}× the whole compile)\n",
-                wall / 1e3,
-                local_ms / wall
-            ));
-            rows.push(BenchRow {
-                what: format!("{id}: projected on {k} nodes"),
-                baseline_ms: local_ms,
-                candidate_ms: wall,
-                speedup: local_ms / wall,
-                note: "model: longest-first over measured unit times + merge + 1 s".into(),
-            });
-        }
+        project(&mut text, &mut rows, id, "compile", local_ms, &unit_ms, merge_ms, "merge");
         if let TableDef::MsLobes(def) = t.def() {
             let slices = def.g_values().len();
             let walk_units = unit_ms.len().saturating_sub(1).max(1);
@@ -295,24 +314,7 @@ pub fn bake(
                 if identical { "identical" } else { "DIFFER" }
             ),
         });
-        text.push_str(
-            "  projected wall time (node = this machine; longest-first; + preparation + merge + 1 s task start):\n",
-        );
-        for k in [1usize, 8, 64, 512] {
-            let wall = makespan(&unit_ms, k) + prepare_ms + merge_ms + TASK_START_S * 1e3;
-            text.push_str(&format!(
-                "    {k:>4} nodes {:>10.1} s  ({:.1}× the whole bake)\n",
-                wall / 1e3,
-                whole_ms / wall
-            ));
-            rows.push(BenchRow {
-                what: format!("{id}: projected on {k} nodes"),
-                baseline_ms: whole_ms,
-                candidate_ms: wall,
-                speedup: whole_ms / wall,
-                note: "model: longest-first over measured tile times + preparation + merge + 1 s".into(),
-            });
-        }
+        project(&mut text, &mut rows, id, "bake", whole_ms, &unit_ms, prepare_ms + merge_ms, "preparation + merge");
     }
     Ok((text, rows))
 }

@@ -243,6 +243,19 @@ pub struct PartEntry {
     pub ms: f64,
 }
 
+impl PartEntry {
+    /// The entry of unit `unit` written as `file` with `bytes`, computed in `ms`.
+    fn of(unit: &str, file: &str, bytes: &[u8], ms: f64) -> Self {
+        PartEntry {
+            unit: unit.to_string(),
+            file: file.to_string(),
+            blake3: blake3::hash(bytes).to_hex().to_string(),
+            bytes: bytes.len() as u64,
+            ms,
+        }
+    }
+}
+
 /// What a part file carries.
 #[derive(Debug, Serialize, Deserialize)]
 enum Payload {
@@ -373,13 +386,7 @@ pub fn compile_shard(
         let t = &p.tables()[u.table];
         let file = part_file(t, u);
         let path = dir.join(&file);
-        let entry = |bytes: &[u8], ms: f64| PartEntry {
-            unit: u.name.clone(),
-            file: file.clone(),
-            blake3: blake3::hash(bytes).to_hex().to_string(),
-            bytes: bytes.len() as u64,
-            ms,
-        };
+        let entry = |bytes: &[u8], ms: f64| PartEntry::of(&u.name, &file, bytes, ms);
         if let Some(bytes) = reusable(&path, part_limit(t)) {
             bar.inc(u.cost);
             return Ok((entry(&bytes, 0.0), true));
@@ -426,27 +433,52 @@ pub fn compile_shard(
         }
         parts.push(e);
     }
-    let manifest = Manifest {
-        format: FORMAT,
-        job: Job::Compile,
-        voltab_version: env!("CARGO_PKG_VERSION").into(),
-        pipeline: p.path().to_path_buf(),
-        scenes: scenes.to_vec(),
-        pipeline_key: pipeline_key(p),
-        shard: spec,
-        units: units.iter().map(|u| u.name.clone()).collect(),
-        parts,
-    };
-    let json = serde_json::to_vec_pretty(&manifest).unwrap_or_default();
-    write_atomic(&dir.join(MANIFEST), &json)?;
-    Ok(ShardSummary {
-        shard: spec,
-        units_total: units.len(),
-        computed,
-        reused,
-        total_ms: t0.elapsed().as_secs_f64() * 1e3,
-        dir: out.path().to_path_buf(),
-    })
+    let finished = Finished { job: Job::Compile, key: pipeline_key(p), units: &units, parts, computed, reused };
+    finished.write(p, scenes, spec, out.path(), t0)
+}
+
+/// A shard task's finished work, before its manifest is written.
+struct Finished<'a> {
+    job: Job,
+    key: String,
+    units: &'a [Unit],
+    parts: Vec<PartEntry>,
+    computed: Vec<(String, f64)>,
+    reused: Vec<String>,
+}
+
+impl Finished<'_> {
+    /// Writes the manifest (last: a folder without one is unfinished) and says what the task did.
+    fn write(
+        self,
+        p: &ValidatedPipeline,
+        scenes: &[PathBuf],
+        spec: ShardSpec,
+        dir: &Path,
+        t0: Instant,
+    ) -> Result<ShardSummary, ShardError> {
+        let manifest = Manifest {
+            format: FORMAT,
+            job: self.job,
+            voltab_version: env!("CARGO_PKG_VERSION").into(),
+            pipeline: p.path().to_path_buf(),
+            scenes: scenes.to_vec(),
+            pipeline_key: self.key,
+            shard: spec,
+            units: self.units.iter().map(|u| u.name.clone()).collect(),
+            parts: self.parts,
+        };
+        let json = serde_json::to_vec_pretty(&manifest).unwrap_or_default();
+        write_atomic(&dir.join(MANIFEST), &json)?;
+        Ok(ShardSummary {
+            shard: spec,
+            units_total: self.units.len(),
+            computed: self.computed,
+            reused: self.reused,
+            total_ms: t0.elapsed().as_secs_f64() * 1e3,
+            dir: dir.to_path_buf(),
+        })
+    }
 }
 
 /// Reads a shard folder's manifest (without checking it against a pipeline).

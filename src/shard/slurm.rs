@@ -157,21 +157,7 @@ pub fn write_and_submit(
         out_q = quote(&out),
     );
     let merge_script = dir.join("merge.sbatch");
-    let shards: Vec<String> = (0..n).map(|i| quote(&shard_dir(&out, i))).collect();
-    let merge = format!(
-        "#!/bin/bash\n\
-         # Written by `voltab slurm`: merges the {n} shards into {out}.\n\
-         #SBATCH --job-name=voltab-merge\n\
-         #SBATCH --output={logs}/merge.log\n\
-         {head}\
-         set -euo pipefail\n\
-         exec {voltab} merge {shards} --out {out_q}\n",
-        out = out.display(),
-        logs = logs.display(),
-        voltab = quote(&voltab),
-        shards = shards.join(" "),
-        out_q = quote(&out),
-    );
+    let merge = merge_job_script(Job::Compile, n, &out, &logs, &head, &voltab);
     let write = |path: &Path, text: &str| -> Result<(), ShardError> {
         crate::cache::write_atomic(path, text.as_bytes())?;
         #[cfg(unix)]
@@ -209,21 +195,7 @@ pub fn write_and_submit(
             out_q = quote(&out),
         );
         let merge_bake_script = dir.join("merge-bake.sbatch");
-        let bake_shards: Vec<String> = (0..n).map(|i| quote(&job_dir(&out, Job::Bake, i))).collect();
-        let merge_bake = format!(
-            "#!/bin/bash\n\
-             # Written by `voltab slurm`: merges the {n} bake shards and runs the stages into {out}.\n\
-             #SBATCH --job-name=voltab-merge-bake\n\
-             #SBATCH --output={logs}/merge-bake.log\n\
-             {head}\
-             set -euo pipefail\n\
-             exec {voltab} merge {shards} --out {out_q}\n",
-            out = out.display(),
-            logs = logs.display(),
-            voltab = quote(&voltab),
-            shards = bake_shards.join(" "),
-            out_q = quote(&out),
-        );
+        let merge_bake = merge_job_script(Job::Bake, n, &out, &logs, &head, &voltab);
         write(&bake_script, &bake_array)?;
         write(&merge_bake_script, &merge_bake)?;
         Some(Phase {
@@ -287,6 +259,30 @@ pub fn write_and_submit(
     job.compile.merge_job = Some(merge_job);
     job.compile.array_job = array_job;
     Ok(job)
+}
+
+/// The merge job of `job`'s `n` shards into `out`.
+fn merge_job_script(job: Job, n: u32, out: &Path, logs: &Path, head: &str, voltab: &Path) -> String {
+    let (what, name) = match job {
+        Job::Compile => ("merges the {n} shards", "merge"),
+        Job::Bake => ("merges the {n} bake shards and runs the stages", "merge-bake"),
+    };
+    let shards: Vec<String> = (0..n).map(|i| quote(&job_dir(out, job, i))).collect();
+    format!(
+        "#!/bin/bash\n\
+         # Written by `voltab slurm`: {what} into {out}.\n\
+         #SBATCH --job-name=voltab-{name}\n\
+         #SBATCH --output={logs}/{name}.log\n\
+         {head}\
+         set -euo pipefail\n\
+         exec {voltab} merge {shards} --out {out_q}\n",
+        what = what.replace("{n}", &n.to_string()),
+        out = out.display(),
+        logs = logs.display(),
+        voltab = quote(voltab),
+        shards = shards.join(" "),
+        out_q = quote(out),
+    )
 }
 
 /// `sbatch --parsable ARGS SCRIPT` → the job id.
