@@ -61,12 +61,30 @@ fn stage_err(e: StageError) -> ShardError {
     ShardError::Spec { message: e.to_string(), help: "fix the stage or its scene".into() }
 }
 
-/// The bake stage of unit `u`, its mode and its tile.
-fn locate<'p>(p: &'p ValidatedPipeline, units: &[Unit], u: &Unit) -> Option<(&'p BakeLightmaps, usize, usize)> {
+/// Tiles per mode of each bake stage (by stage index), counted once from the unit list.
+fn tiles_per_mode(p: &ValidatedPipeline, units: &[Unit]) -> std::collections::BTreeMap<usize, usize> {
+    let mut count = std::collections::BTreeMap::new();
+    for u in units {
+        *count.entry(u.table).or_insert(0) += 1;
+    }
+    for (si, n) in &mut count {
+        if let Some(StageDef::BakeLightmaps(b)) = p.stages().get(*si).map(|s| s.def()) {
+            *n /= b.modes.len().max(1);
+        }
+    }
+    count
+}
+
+/// The bake stage of unit `u`, its mode and its tile (`tiles`: [`tiles_per_mode`]).
+fn locate<'p>(
+    p: &'p ValidatedPipeline,
+    tiles: &std::collections::BTreeMap<usize, usize>,
+    u: &Unit,
+) -> Option<(&'p BakeLightmaps, usize, usize)> {
     let StageDef::BakeLightmaps(b) = p.stages().get(u.table)?.def() else { return None };
-    let tiles = units.iter().filter(|v| v.table == u.table).count() / b.modes.len().max(1);
+    let t = tiles.get(&u.table).copied().unwrap_or(1).max(1);
     let k = u.part?;
-    Some((b, k / tiles.max(1), k % tiles.max(1)))
+    Some((b, k / t, k % t))
 }
 
 fn part_file(key: &str, u: &Unit) -> String {
@@ -91,6 +109,7 @@ pub fn bake_shard(
         eprintln!("waiting for another voltab run that is using {}", dir.display());
     })?;
     let owner = assign(&units, spec.count);
+    let tiles = tiles_per_mode(p, &units);
     let mine: Vec<&Unit> = units.iter().zip(&owner).filter(|(_, s)| **s == spec.index).map(|(u, _)| u).collect();
     let bar = crate::compile::progress_bar(ctx.progress, mine.iter().map(|u| u.cost).sum());
     let mut parts = Vec::with_capacity(mine.len());
@@ -108,7 +127,7 @@ pub fn bake_shard(
             parts.push(entry(&bytes, 0.0));
             continue;
         }
-        let Some((b, mode, tile)) = locate(p, &units, u) else {
+        let Some((b, mode, tile)) = locate(p, &tiles, u) else {
             return Err(ShardError::Spec {
                 message: format!("unit {} names no bake", u.name),
                 help: "report this bug".into(),
