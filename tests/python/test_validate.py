@@ -102,9 +102,9 @@ def test_bake_full_mode_is_never_worse_than_surface_or_shadow(validation):
         assert full <= (method(stages, "fog_room_bake", other)["rel_rmse"] or 0.0)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 32: the window room's in-scatter measures 13.0 % [12.7, 13.3] "
-                   "relative RMSE (floor 2.3 %), mean ×1.046, against ≤ 5 % and within 3 %")
 def test_god_rays_meet_issue_32_targets(validation):
+    # Measured 13.0 % [12.7, 13.3] (floor 2.3 %), mean ×1.046 while the sun was not attenuated on its way
+    # through the fog; 2.5 % [0.0, 3.6], mean ×1.000 with the light entering the fog box at its faces.
     _, _, stages = validation
     epi = method(stages, "window_room_god_rays", "epipolar")
     assert epi["rel_rmse"] is None or epi["rel_rmse"] <= 0.05, epi
@@ -151,12 +151,14 @@ def test_image_fog_beats_attenuation_only_and_no_fog(validation):
 def test_internal_references_are_judged_too(validation):
     # issue 30: each stage's internal reference is checked against Mitsuba, so a simplification it shares
     # with the method shows. The god-ray marcher integrates the stage's own light model: its mean equals
-    # the epipolar image's within 1 %, and so it cannot see the model's error, which Mitsuba does.
+    # the epipolar image's within 1 %; when both left out the light's attenuation before it scatters
+    # (stop 41) both were ×1.045 off Mitsuba, now the marcher's mean is within 3 % of it as well.
     _, _, stages = validation
     epi = method(stages, "window_room_god_rays", "epipolar")
     marcher = method(stages, "window_room_god_rays", "internal reference (128-step BVH marcher)")
     assert abs(epi["method_mean"] / marcher["method_mean"] - 1) < 0.01, (epi, marcher)
     assert marcher["rel_rmse"] is not None and marcher["floor"] <= 0.05, marcher
+    assert abs(marcher["method_mean"] / marcher["reference_mean"] - 1) <= 0.03, marcher
     for name in ("Wax", "Oil", "Skin"):
         pt = method(stages, f"translucent_materials/{name}", "internal reference (path tracer, 256 paths)")
         assert pt["floor"] is not None and pt["reference_mean"] > 0, pt

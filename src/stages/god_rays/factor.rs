@@ -6,8 +6,10 @@
 //! integration grid's `γ` bins and `B_i` at any `β`.
 //!
 //! The integrand per unit `γ` is `a(β)·K̃(γ, β)`:
-//! - directional: `a = p(cos β)/sin β`, `K̃ = e^{−σ_t γ/sin β}` (path length `s = γ/sin β`,
-//!   `ds/dγ = 1/sin β`);
+//! - directional: `a = p(cos β)/sin β`, `K̃ = e^{−σ_t γ tan(β/2)}`: the view-ray attenuation
+//!   `e^{−σ_t s}` (path length `s = γ/sin β`, `ds/dγ = 1/sin β`) times the light's attenuation from the
+//!   eye's plane, `e^{σ_t s cos β}` (the per-light-ray rest `e^{−σ_t a_entry(γ)}` is applied outside,
+//!   module doc of [`super`]); `s(1 − cos β) = γ tan(β/2)`;
 //! - spot (Sec. 9, triangle eye–light–point with angles `β`, `γ`): `a = 1/(D sin β)`,
 //!   `K̃ = p(cos(β+γ))·e^{−σ_t D (sin γ + sin β)/sin(β+γ)}` (0 for `β + γ ≥ π`), which is
 //!   `p·e^{−σ_t(s+r)}·(ds/dγ)/r²` with `s = D sin γ/sin(β+γ)`, `r = D sin β/sin(β+γ)`.
@@ -17,7 +19,8 @@
 //! decays within one bin), sampled on 128 `γ` nodes × 64 `β` nodes, decomposed by a one-sided Jacobi
 //! SVD, truncated to rank `N`; `Γ_i` is extended to every bin exactly (`Γ_i(γ) = Σ_n K̃(γ, β_n)·V_ni/s_i`,
 //! the Nyström extension of the left singular vectors) and `B_i = a(β)·s_i·V_i` is interpolated
-//! linearly between the 64 `β` nodes (uniform in `ln tan(β/2)`). The light's strength, `σ_s` and texture are applied outside.
+//! linearly between the 64 `β` nodes (uniform in `ln tan(β/2)`). The light's strength, `σ_s`, texture
+//! and (directional) entry attenuation are applied outside.
 
 use rayon::prelude::*;
 
@@ -180,7 +183,7 @@ pub fn kernel_bin(geo: Geo, medium: &EpiMedium, sigma: f64, g: f64, w: f64, beta
     }
     match geo {
         Geo::Directional { .. } => {
-            let c = sigma / beta.sin().max(1e-12);
+            let c = sigma * (0.5 * beta.clamp(0.0, std::f64::consts::PI - 1e-12)).tan();
             exp_integral(c, lo, hi) / (hi - lo)
         }
         Geo::Spot { dist, .. } => {

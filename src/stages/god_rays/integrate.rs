@@ -11,7 +11,7 @@
 //! (terminations at most one `β` step apart merge; then the closest modes merge until at most
 //! `depth_modes` remain), each with its weight (fraction of sub-samples; `M` is read at the bin's
 //! centre sub-sample); (2) build the Fenwick tree of `N`-vectors `Γ_i(γ)·M(α, γ)·Δγ` (`M` = light texture ×
-//! spot falloff along the light ray); (3) sweep `β` upwards: remove each mode's fraction of its bin
+//! spot falloff along the light ray, × the directional light's entry attenuation `e^{−σ_t a_entry}`); (3) sweep `β` upwards: remove each mode's fraction of its bin
 //! when the sweep passes the mode's angle (the last mode of a fully blocked bin removes the exact
 //! remainder, so the bin becomes exactly 0), query the prefix sum up to the fractional `γ_end`, and
 //! combine with `B_i(β)`.
@@ -23,7 +23,7 @@ use glam::DVec3;
 use super::factor::Factorization;
 use super::rectify::{Geo, Setup, Slice};
 use super::tree::FenwickTree;
-use super::{EpiLight, EpiMedium, EpipolarOptions, ShadowMap, modulation};
+use super::{EpiLight, EpiMedium, EpipolarOptions, MAX_LIGHT_GAIN, ShadowMap, modulation};
 
 /// Results of one slice.
 #[derive(Debug, Clone, PartialEq)]
@@ -34,6 +34,9 @@ pub struct SliceResult {
     pub prefilter_ns: u64,
     /// CPU time of the tree build and sweep \[ns\].
     pub integrate_ns: u64,
+    /// Whether a light ray of the slice needs a gain above [`MAX_LIGHT_GAIN`] (its `values` are then
+    /// empty and its pixels ray marched).
+    pub over_gain: bool,
 }
 
 /// Where the light ray `γ` of the slice with axis `u` is blocked, as `cot β` of the view ray through
@@ -151,12 +154,16 @@ pub(crate) struct Prefiltered {
     pub events: Vec<(u32, u32, u32)>,
     /// Whether the event removes its bin's exact remainder (the last mode of a fully blocked bin).
     pub exact_last: Vec<bool>,
-    /// Light modulation at each bin's centre (1 for an untextured directional light).
+    /// Light modulation at each bin's centre (texture × spot falloff; for a directional light times
+    /// the per-light-ray attenuation `e^{−σ_t a_entry}`, 0 where the light ray misses the medium).
     pub modul: Vec<[f64; 3]>,
+    /// Largest directional entry gain over the bins (1 for spot lights).
+    pub gain: f64,
 }
 
 /// Rectifies the shadow map of slice `s` over its first `nb` bins of width `dg` into depth modes
 /// (module doc, step 1).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn prefilter_slice(
     setup: &Setup,
     s: &Slice,
@@ -164,12 +171,14 @@ pub(crate) fn prefilter_slice(
     dg: f64,
     light: &EpiLight,
     shadow: &ShadowMap,
+    medium: &EpiMedium,
     opts: &EpipolarOptions,
 ) -> Prefiltered {
     let nbeta = s.betas.len();
     let sub = if opts.depth_modes > 1 { 4 } else { 1 };
     let cots: Vec<f64> = s.betas.iter().map(|b| b.cos() / b.sin()).collect();
-    let plain = matches!(light, EpiLight::Directional { texture: None, .. });
+    let directional = matches!(light, EpiLight::Directional { .. });
+    let mut gain = 1.0f64;
     let mut events: Vec<(u32, u32, u32)> = Vec::new();
     let mut exact_last: Vec<bool> = Vec::new();
     let mut modul = vec![[1.0f64; 3]; nb];
@@ -189,8 +198,17 @@ pub(crate) fn prefilter_slice(
                 None => nbeta,
             };
         }
-        if !plain {
-            *m = modulation(light, &shadow.frame, light_point(setup.geo, setup.eye, s.u, (j as f64 + 0.5) * dg));
+        let q = light_point(setup.geo, setup.eye, s.u, (j as f64 + 0.5) * dg);
+        *m = modulation(light, &shadow.frame, q);
+        if directional {
+            let att = match medium.light_entry(q, setup.geo.toward()) {
+                Some(a) => medium.light_attenuation(a),
+                None => [0.0; 3],
+            };
+            gain = att.iter().fold(gain, |g, &x| g.max(x));
+            for c in 0..3 {
+                m[c] *= att[c];
+            }
         }
         let k = &mut ks[..sub];
         k.sort_unstable();
@@ -209,7 +227,7 @@ pub(crate) fn prefilter_slice(
             exact_last[last] = true;
         }
     }
-    Prefiltered { events, exact_last, modul }
+    Prefiltered { events, exact_last, modul, gain }
 }
 
 /// Integrates one slice (module doc).
@@ -233,8 +251,17 @@ pub fn integrate_slice(
     let sub = if opts.depth_modes > 1 { 4 } else { 1 };
 
     // (1) Rectified shadow map with depth modes → events (β index, bin, sub-sample count).
-    let Prefiltered { events, exact_last, modul } = prefilter_slice(setup, s, nb, dg, light, shadow, opts);
+    let Prefiltered { events, exact_last, modul, gain } =
+        prefilter_slice(setup, s, nb, dg, light, shadow, medium, opts);
     let t1 = Instant::now();
+    if gain > MAX_LIGHT_GAIN {
+        return SliceResult {
+            values: Vec::new(),
+            prefilter_ns: (t1 - t0).as_nanos() as u64,
+            integrate_ns: 0,
+            over_gain: true,
+        };
+    }
 
     // (2) Tree of Γ_i(γ)·M·Δγ.
     let mut vals = vec![0.0f64; nb * lanes];
@@ -296,5 +323,10 @@ pub fn integrate_slice(
         values.push(px);
     }
     let t2 = Instant::now();
-    SliceResult { values, prefilter_ns: (t1 - t0).as_nanos() as u64, integrate_ns: (t2 - t1).as_nanos() as u64 }
+    SliceResult {
+        values,
+        prefilter_ns: (t1 - t0).as_nanos() as u64,
+        integrate_ns: (t2 - t1).as_nanos() as u64,
+        over_gain: false,
+    }
 }

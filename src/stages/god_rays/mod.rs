@@ -23,12 +23,22 @@
 //! **Conventions** (shared with the references, so all methods integrate the same quantity):
 //! - Single scattering `L = ∫₀^d e^{−σ_t s} σ_s p(μ) L_in(x(s)) V(x(s)) ds` per channel, `p` the HG
 //!   phase with `μ` the cosine between the light's propagation direction and the direction to the eye.
-//! - Directional light: `L_in = E · texture`, not attenuated on its way to `x` (the irradiance `E` is
-//!   the value at the scattering point). Spot light: `L_in = I · falloff · texture · e^{−σ_t r} / r²`
-//!   with `r` the distance to the light and the KHR falloff `clamp((cos θ − cos θ_o)/(cos θ_i −
-//!   cos θ_o), 0, 1)²`.
-//! - The medium fills space; a view ray ends at its depth, and a ray that hits nothing ends where it
-//!   leaves the scene bounds (the box the shadow map was fitted to, [`view_extent`]).
+//! - The medium fills the box [`EpiMedium::region`] (a global medium: [`Scene::global_medium_bounds`],
+//!   the region the Mitsuba export gives it too) and is vacuum outside it. A view ray integrates over
+//!   its segment inside the box and in front of its depth ([`view_segment`]).
+//! - Directional light: `L_in = E · texture · e^{−σ_t u}`, `E` the irradiance outside the medium and
+//!   `u` the distance the light travelled inside the box to reach `x` (from where its ray enters the
+//!   box, [`EpiMedium::light_entry`]). Spot light (inside the box): `L_in = I · falloff · texture ·
+//!   e^{−σ_t r} / r²` with `r` the distance to the light and the KHR falloff `clamp((cos θ − cos θ_o)/
+//!   (cos θ_i − cos θ_o), 0, 1)²`.
+//! - The epipolar split of the directional attenuation: with `a` the coordinate along the direction to
+//!   the light measured from the eye, `u = a_entry(γ) − a(x)`, so `e^{−σ_t s}·e^{−σ_t u} =
+//!   e^{−σ_t γ tan(β/2)} · e^{−σ_t a_entry(γ)}`: the first factor is the (still exponential) kernel
+//!   [`factor`] factorises, the second a per-light-ray factor like the texture. Where a light ray
+//!   enters the box behind the eye's plane (`a_entry < 0`) the second factor exceeds 1 and amplifies
+//!   the kernel's truncation error; a slice whose largest gain exceeds [`MAX_LIGHT_GAIN`] is ray
+//!   marched instead (counted in [`EpipolarStats::gain_pixels`]), as is every pixel when the eye is
+//!   outside the box (the view segment then does not start at the eye).
 //! - Visibility `V` comes from the shadow map (nearest texel, depth bias [`ShadowMap::bias`]) for
 //!   [`render`] and [`march_shadow_map`]; [`march_bvh`] casts real shadow rays.
 //! - Per-channel `σ`: when `σ_t` is the same in all channels one kernel is factorised and `σ_s,c·E_c`
@@ -158,16 +168,46 @@ pub struct EpiMedium {
     pub sigma_a: [f64; 3],
     /// HG mean cosine (one value for all channels: the factorisation shares `β` across channels).
     pub g: f64,
+    /// The box the medium fills, `(min, max)` corners \[m\]; vacuum outside it.
+    pub region: ([f64; 3], [f64; 3]),
 }
 
+/// Largest per-light-ray gain `e^{−σ_t a_entry}` the epipolar integration accepts (module doc); a slice
+/// needing more is ray marched.
+pub const MAX_LIGHT_GAIN: f64 = 64.0;
+
 impl EpiMedium {
-    /// The first homogeneous global medium of `scene` (its `g` is the channel mean), `None` if none.
+    /// The first homogeneous global medium of `scene` (its `g` is the channel mean) over the scene's
+    /// global-medium box, `None` if there is none (or the scene has no extent).
     pub fn from_scene(scene: &Scene) -> Option<EpiMedium> {
+        let region = scene.global_medium_bounds()?;
         scene
             .media
             .iter()
             .find(|m| m.boundary == Boundary::Global && m.density == Density::Homogeneous)
-            .map(|m| EpiMedium { sigma_s: m.sigma_s, sigma_a: m.sigma_a, g: (m.g[0] + m.g[1] + m.g[2]) / 3.0 })
+            .map(|m| EpiMedium { sigma_s: m.sigma_s, sigma_a: m.sigma_a, g: (m.g[0] + m.g[1] + m.g[2]) / 3.0, region })
+    }
+
+    /// Whether `p` lies in [`EpiMedium::region`] (boundary included).
+    pub fn contains(&self, p: DVec3) -> bool {
+        (0..3).all(|a| p[a] >= self.region.0[a] && p[a] <= self.region.1[a])
+    }
+
+    /// Where the light enters the medium on the line `p + a·toward` (`toward` the unit direction to
+    /// the light): the largest `a` at which the line is inside the region, `None` when it misses it.
+    /// For `p` inside the region it is the distance the light travels in the medium to reach `p`.
+    pub fn light_entry(&self, p: DVec3, toward: DVec3) -> Option<f64> {
+        let (lo, hi) = clip_line(p, toward, self.region)?;
+        (hi >= lo).then_some(hi)
+    }
+
+    /// Per-channel light attenuation `e^{−σ_t a}` for a light path of length `a` in the medium
+    /// (negative `a`: gain, see the module doc); 0 for a non-finite `a`.
+    pub fn light_attenuation(&self, a: f64) -> [f64; 3] {
+        self.sigma_t().map(|s| {
+            let v = (-s * a).exp();
+            if v.is_finite() { v } else { 0.0 }
+        })
     }
 
     /// Extinction per channel (negative or NaN inputs count as 0).
@@ -206,7 +246,8 @@ pub struct EpipolarOptions {
     /// Largest number of depth modes per `γ` bin (Sec. 7). 1 disables prefiltering (one blocker
     /// sample per bin); otherwise 4 sub-samples per bin are clustered into at most this many modes.
     pub depth_modes: usize,
-    /// Radius \[px\] of the disc around the epipole that is ray marched; `None`: 2° of view angle.
+    /// Radius \[px\] of the disc around the epipole that is ray marched; `None`: 2° of view angle (4° around
+    /// the anti-epipole of a directional light behind the camera, where the kernel is steepest).
     pub ring_px: Option<f64>,
     /// Steps per ray of the ring march.
     pub ring_steps: usize,
@@ -252,6 +293,11 @@ pub struct EpipolarStats {
     /// Pixels outside the ring ray marched because no slice sample near them has a matching depth
     /// (silhouettes thinner than the slice spacing).
     pub edge_pixels: usize,
+    /// Pixels ray marched because the slices around them need a light gain above [`MAX_LIGHT_GAIN`],
+    /// or (all pixels) because the eye is outside the medium's region (module doc).
+    pub gain_pixels: usize,
+    /// Slices whose light gain exceeds [`MAX_LIGHT_GAIN`].
+    pub gain_slices: usize,
     /// Ratio of the `N+1`-th to the first singular value (0 when the rank is complete): how much the
     /// truncation leaves out.
     pub svd_residual: f64,
@@ -268,27 +314,38 @@ pub struct EpipolarOutput {
     pub stats: EpipolarStats,
 }
 
-/// Length of the medium segment of a view ray: its depth, or for a ray that hits nothing the distance
-/// at which it leaves `bounds` (0 if it never is inside them).
-pub fn view_extent(origin: DVec3, dir: DVec3, depth: f32, bounds: ([f64; 3], [f64; 3])) -> f64 {
-    let d = f64::from(depth);
-    if d.is_finite() {
-        return d.max(0.0);
-    }
-    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+/// The parameter interval `(lo, hi)` over which the line `origin + t·dir` lies in the box `b`
+/// (unbounded along axes it runs parallel to inside the slab), `None` when it misses the box.
+pub(crate) fn clip_line(origin: DVec3, dir: DVec3, b: ([f64; 3], [f64; 3])) -> Option<(f64, f64)> {
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
     for a in 0..3 {
         let (o, v) = (origin[a], dir[a]);
         if v.abs() < 1e-300 {
-            if o < bounds.0[a] || o > bounds.1[a] {
-                return 0.0;
+            if o < b.0[a] || o > b.1[a] {
+                return None;
             }
             continue;
         }
-        let (ta, tb) = ((bounds.0[a] - o) / v, (bounds.1[a] - o) / v);
+        let (ta, tb) = ((b.0[a] - o) / v, (b.1[a] - o) / v);
         t0 = t0.max(ta.min(tb));
         t1 = t1.min(ta.max(tb));
     }
-    if t1 > t0 && t1.is_finite() { t1 } else { 0.0 }
+    (t1 >= t0 && t0.is_finite() && t1.is_finite()).then_some((t0, t1))
+}
+
+/// The medium segment `(s0, s1)` of a view ray from `origin` along unit `dir` that ends at `depth`
+/// (infinite: hits nothing): the part inside `region` and in front of the depth; `(0, 0)` when the
+/// ray never is in the region. `s0 > 0` only for an origin outside the region.
+pub fn view_segment(origin: DVec3, dir: DVec3, depth: f32, region: ([f64; 3], [f64; 3])) -> (f64, f64) {
+    let d = f64::from(depth);
+    let end = if d.is_nan() { 0.0 } else { d.max(0.0) };
+    match clip_line(origin, dir, region) {
+        Some((lo, hi)) => {
+            let (s0, s1) = (lo.max(0.0), hi.min(end));
+            if s1 > s0 { (s0, s1) } else { (0.0, 0.0) }
+        }
+        None => (0.0, 0.0),
+    }
 }
 
 /// `∫_a^b e^{−σ t} dt` without cancellation, for `σ ≥ 0` (`b − a` at `σ = 0`).
@@ -352,7 +409,7 @@ pub fn render(
 
     // 1. Slices and rectified depth.
     let t0 = Instant::now();
-    let setup = rectify::Setup::new(cam, depth, light, shadow, opts);
+    let setup = rectify::Setup::new(cam, depth, light, medium.region, opts);
     stats.rectify_ms = ms(t0);
     stats.slices = setup.slices.len();
     stats.samples = setup.slices.iter().map(|s| s.betas.len()).sum();
@@ -370,6 +427,8 @@ pub fn render(
         .par_iter()
         .map(|s| integrate::integrate_slice(&setup, &fac, s, light, shadow, medium, opts))
         .collect();
+    stats.gain_slices = per_slice.iter().filter(|r| r.over_gain).count();
+    let eye_inside = medium.contains(cam.position);
     let wall = ms(t2);
     let (pre, int): (f64, f64) =
         per_slice.iter().fold((0.0, 0.0), |(a, b), r| (a + r.prefilter_ns as f64, b + r.integrate_ns as f64));
@@ -387,13 +446,18 @@ pub fn render(
             let (mut row, mut trow, mut march) = (vec![[0.0f32; 3]; w], vec![[1.0f32; 3]; w], Vec::new());
             for x in 0..w {
                 let v = cam.pixel_dir(x, y);
-                let d = view_extent(cam.position, v, depth_at(depth, x, y), shadow.bounds);
+                let (s0, s1) = view_segment(cam.position, v, depth_at(depth, x, y), medium.region);
+                let d = s1 - s0;
                 trow[x] =
                     if grey { [(-sigma_t[0] * d).exp() as f32; 3] } else { sigma_t.map(|s| (-s * d).exp() as f32) };
-                let r = if setup.in_ring(x, y) { None } else { setup.unrectify(&per_slice, x, y, v, d, fac.dgamma) };
+                let r = if setup.in_ring(x, y) || !eye_inside {
+                    None
+                } else {
+                    setup.unrectify(&per_slice, x, y, v, s1, fac.dgamma)
+                };
                 match r {
                     Some(px) => row[x] = px,
-                    None => march.push(x),
+                    None => march.push((x, !eye_inside || setup.over_gain(&per_slice, x, y))),
                 }
             }
             (row, trow, march)
@@ -405,20 +469,26 @@ pub fn render(
     for (y, (row, trow, march)) in rows.into_iter().enumerate() {
         inscatter.data[y * w..(y + 1) * w].copy_from_slice(&row);
         transmittance.data[y * w..(y + 1) * w].copy_from_slice(&trow);
-        ring.extend(march.into_iter().map(|x| (x, y)));
+        for (x, other) in march {
+            if setup.in_ring(x, y) && eye_inside {
+                stats.ring_pixels += 1;
+            } else if other {
+                stats.gain_pixels += 1;
+            } else {
+                stats.edge_pixels += 1;
+            }
+            ring.push((x, y));
+        }
     }
     stats.unrectify_ms = ms(t3);
 
     let t4 = Instant::now();
-    stats.ring_pixels = ring.iter().filter(|&&(x, y)| setup.in_ring(x, y)).count();
-    stats.edge_pixels = ring.len() - stats.ring_pixels;
     let ctx = reference::MarchCtx {
         cam,
         depth,
         light,
         vis: reference::Visibility::ShadowMap(shadow),
         medium,
-        bounds: shadow.bounds,
         frame: &shadow.frame,
         steps: opts.ring_steps,
     };
@@ -432,7 +502,9 @@ pub fn render(
 }
 
 /// One row of unrectified in-scatter, its transmittance and the columns left for ray marching.
-type UnrectifiedRow = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<usize>);
+/// A marched column carries whether it is marched for the light gain or the eye's position (not a
+/// silhouette or the ring).
+type UnrectifiedRow = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<(usize, bool)>);
 
 /// `colour · T + inscatter` per pixel and channel (images of equal size; extra pixels of a larger
 /// `colour` are ignored, missing ones read as black).

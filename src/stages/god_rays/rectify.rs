@@ -22,7 +22,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::integrate::SliceResult;
-use super::{DistanceImage, EpiLight, EpipolarOptions, ShadowMap, ViewCamera, depth_at, view_extent};
+use super::{DistanceImage, EpiLight, EpipolarOptions, ViewCamera, depth_at, view_segment};
 
 /// The epipolar geometry of the light relative to the eye.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -164,12 +164,13 @@ fn rel_angle(r: [f64; 2], d: [f64; 2]) -> f64 {
 }
 
 impl Setup {
-    /// Lays out the slices and rectifies the depth map (parallel over slices).
+    /// Lays out the slices and rectifies the depth map (parallel over slices); view rays end at their
+    /// depth or where they leave the medium's `region`.
     pub fn new(
         cam: &ViewCamera,
         depth: &DistanceImage,
         light: &EpiLight,
-        shadow: &ShadowMap,
+        region: ([f64; 3], [f64; 3]),
         opts: &EpipolarOptions,
     ) -> Setup {
         let (mut setup, layout) = Setup::layout(cam, light, opts);
@@ -186,7 +187,7 @@ impl Setup {
                         Some((q, true)) => depth_at(depth, q[0].max(0.0) as usize, q[1].max(0.0) as usize),
                         _ => f32::INFINITY,
                     };
-                    let ext = view_extent(eye, v, dpx, shadow.bounds);
+                    let (_, ext) = view_segment(eye, v, dpx, region);
                     betas.push(beta);
                     gend.push(geo.gamma_end(eye, v, beta, ext));
                 }
@@ -218,7 +219,11 @@ impl Setup {
                 [centre[0] + far * s[0] / n, centre[1] + far * s[1] / n]
             }
         };
-        let ring = opts.ring_px.unwrap_or_else(|| 2f64.to_radians().tan() / cam.tan_half_y * 0.5 * h).max(0.0);
+        // Around the anti-epipole (a directional light behind the camera) the kernel
+        // e^{−σ_t γ tan(β/2)} is at its steepest, so the marched disc is twice as wide there.
+        let behind = matches!(geo, Geo::Directional { .. }) && t.dot(cam.forward) < 0.0;
+        let ring_deg = if behind { 4f64 } else { 2f64 };
+        let ring = opts.ring_px.unwrap_or_else(|| ring_deg.to_radians().tan() / cam.tan_half_y * 0.5 * h).max(0.0);
         let (ex, ey) = (epipole[0] - centre[0], epipole[1] - centre[1]);
         let ref_dir = if ex.hypot(ey) > 1e-9 {
             let n = ex.hypot(ey);
@@ -317,6 +322,39 @@ impl Setup {
         dx.hypot(dy) < self.ring
     }
 
+    /// The two slices bracketing the screen angle of pixel `(x, y)` and the weight of the second.
+    fn bracket(&self, x: usize, y: usize) -> Option<(usize, usize, f64)> {
+        let n = self.slices.len();
+        if n == 0 || x >= self.width || y >= self.height {
+            return None;
+        }
+        let (dx, dy) = (x as f64 + 0.5 - self.epipole[0], y as f64 + 0.5 - self.epipole[1]);
+        let len = dx.hypot(dy);
+        let th = if len > 0.0 { rel_angle(self.ref_dir, [dx / len, dy / len]) } else { 0.0 };
+        let k = self.slices.partition_point(|s| s.angle <= th);
+        Some(if self.inside {
+            let lo = (k + n - 1) % n;
+            let hi = k % n;
+            let tau = std::f64::consts::TAU;
+            let span = (self.slices[hi].angle - self.slices[lo].angle).rem_euclid(tau);
+            let off = (th - self.slices[lo].angle).rem_euclid(tau);
+            (lo, hi, if span > 0.0 { (off / span).clamp(0.0, 1.0) } else { 0.0 })
+        } else if k == 0 {
+            (0, 0, 0.0)
+        } else if k >= n {
+            (n - 1, n - 1, 0.0)
+        } else {
+            let span = self.slices[k].angle - self.slices[k - 1].angle;
+            (k - 1, k, if span > 0.0 { ((th - self.slices[k - 1].angle) / span).clamp(0.0, 1.0) } else { 0.0 })
+        })
+    }
+
+    /// Whether a slice bracketing pixel `(x, y)` was left to ray marching for its light gain
+    /// ([`super::MAX_LIGHT_GAIN`]).
+    pub fn over_gain(&self, results: &[SliceResult], x: usize, y: usize) -> bool {
+        self.bracket(x, y).is_some_and(|(lo, hi, _)| results[lo].over_gain || results[hi].over_gain)
+    }
+
     /// The result at pixel `(x, y)` with unit view direction `v` and view extent `extent`: the two
     /// slices bracketing its screen angle, each with its two `β` samples around the pixel's `β`,
     /// blended bilinearly (angle × `β`) over the samples whose rectified depth matches the pixel's
@@ -331,34 +369,15 @@ impl Setup {
         extent: f64,
         dgamma: f64,
     ) -> Option<[f32; 3]> {
-        let n = self.slices.len();
-        if n == 0 || x >= self.width || y >= self.height {
-            return None;
-        }
-        let (dx, dy) = (x as f64 + 0.5 - self.epipole[0], y as f64 + 0.5 - self.epipole[1]);
-        let len = dx.hypot(dy);
-        let th = if len > 0.0 { rel_angle(self.ref_dir, [dx / len, dy / len]) } else { 0.0 };
-        let k = self.slices.partition_point(|s| s.angle <= th);
-        let (lo, hi, wgt) = if self.inside {
-            let lo = (k + n - 1) % n;
-            let hi = k % n;
-            let tau = std::f64::consts::TAU;
-            let span = (self.slices[hi].angle - self.slices[lo].angle).rem_euclid(tau);
-            let off = (th - self.slices[lo].angle).rem_euclid(tau);
-            (lo, hi, if span > 0.0 { (off / span).clamp(0.0, 1.0) } else { 0.0 })
-        } else if k == 0 {
-            (0, 0, 0.0)
-        } else if k >= n {
-            (n - 1, n - 1, 0.0)
-        } else {
-            let span = self.slices[k].angle - self.slices[k - 1].angle;
-            (k - 1, k, if span > 0.0 { ((th - self.slices[k - 1].angle) / span).clamp(0.0, 1.0) } else { 0.0 })
-        };
+        let (lo, hi, wgt) = self.bracket(x, y)?;
         let beta = self.geo.beta(v);
         let gp = self.geo.gamma_end(self.eye, v, beta, extent);
         let (mut acc, mut wsum) = ([0.0f64; 3], 0.0f64);
         for (si, ws) in [(lo, 1.0 - wgt), (hi, wgt)] {
             let s = &self.slices[si];
+            if results[si].over_gain {
+                continue;
+            }
             let vals = &results[si].values;
             let m = s.betas.len();
             if m == 0 || vals.len() != m {

@@ -6,7 +6,7 @@
 //! medium and a step count → the in-scatter image, the same quantity [`super::render`] computes (the
 //! conventions are in the module doc of [`super`]).
 //!
-//! Each view ray `[0, d]` is split into `steps` equal strata; stratum `k` contributes
+//! Each view ray's medium segment `[s0, d]` ([`super::view_segment`]) is split into `steps` equal strata; stratum `k` contributes
 //! `V(x)·σ_s p(μ) L_in(x) · ∫_{stratum} e^{−σ_t s} ds` with `x` at a jittered position inside it. The
 //! transmittance integral is exact, so the estimate is exact for a constant integrand (an unshadowed
 //! untextured directional light) and converges as `O(steps⁻¹)` or faster otherwise. The jitter is
@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use super::{
     DistanceImage, EpiLight, EpiMedium, Image, LightFrame, RgbImage, ShadowMap, ViewCamera, depth_at, exp_integral,
-    modulation, view_extent,
+    modulation, view_segment,
 };
 use crate::physics::rng::StreamKey;
 use crate::scene::bvh::SceneBvh;
@@ -46,10 +46,8 @@ pub struct MarchCtx<'a> {
     pub light: &'a EpiLight,
     /// Visibility.
     pub vis: Visibility<'a>,
-    /// Medium.
+    /// Medium (and the region it fills: where view rays start and end, where the light enters).
     pub medium: &'a EpiMedium,
-    /// Scene bounds (where escaping rays end).
-    pub bounds: ([f64; 3], [f64; 3]),
     /// Light projection (texture coordinates).
     pub frame: &'a LightFrame,
     /// Strata per ray (at least 1).
@@ -66,7 +64,9 @@ impl MarchCtx<'_> {
             EpiLight::Directional { direction, .. } => {
                 let l = DVec3::from_array(*direction).try_normalize().unwrap_or(DVec3::NEG_Y);
                 let p = self.medium.phase(-l.dot(v));
-                [0, 1, 2].map(|c| sig_s[c] * p * strength[c] * m[c])
+                let u = self.depth_to_light(x, -l);
+                let st = self.medium.sigma_t();
+                [0, 1, 2].map(|c| sig_s[c] * p * strength[c] * m[c] * (-st[c] * u).exp())
             }
             EpiLight::Spot { position, .. } => {
                 let wv = x - DVec3::from_array(*position);
@@ -79,6 +79,20 @@ impl MarchCtx<'_> {
                 [0, 1, 2].map(|c| sig_s[c] * p * strength[c] * m[c] * (-st[c] * r).exp() / (r * r))
             }
         }
+    }
+
+    /// How far the light has travelled inside the medium's box to reach `x` (inside it) along `-toward`:
+    /// the distance from `x` to the box's face in the direction `toward` of the light.
+    fn depth_to_light(&self, x: DVec3, toward: DVec3) -> f64 {
+        let (lo, hi) = self.medium.region;
+        let mut u = f64::INFINITY;
+        for a in 0..3 {
+            let face = if toward[a] > 0.0 { hi[a] } else { lo[a] };
+            if toward[a] != 0.0 {
+                u = u.min(((face - x[a]) / toward[a]).max(0.0));
+            }
+        }
+        if u.is_finite() { u } else { 0.0 }
     }
 
     fn visible(&self, x: DVec3) -> bool {
@@ -100,17 +114,17 @@ impl MarchCtx<'_> {
     /// The in-scatter of pixel `(x, y)`.
     pub fn pixel(&self, x: usize, y: usize) -> [f32; 3] {
         let v = self.cam.pixel_dir(x, y);
-        let d = view_extent(self.cam.position, v, depth_at(self.depth, x, y), self.bounds);
+        let (s0, d) = view_segment(self.cam.position, v, depth_at(self.depth, x, y), self.medium.region);
         let n = self.steps.max(1);
-        if d <= 0.0 {
+        if d <= s0 {
             return [0.0; 3];
         }
         let key = StreamKey { table: JITTER_TABLE, cell: (y * self.cam.width + x) as u64 };
         let st = self.medium.sigma_t();
-        let dt = d / n as f64;
+        let dt = (d - s0) / n as f64;
         let mut acc = [0.0f64; 3];
         for k in 0..n {
-            let a = k as f64 * dt;
+            let a = s0 + k as f64 * dt;
             let b = if k + 1 == n { d } else { a + dt };
             let t = a + key.uniform(k as u64, 0) * (b - a);
             let p = self.cam.position + t * v;
@@ -153,7 +167,6 @@ pub fn march_shadow_map(
         light,
         vis: Visibility::ShadowMap(shadow),
         medium,
-        bounds: shadow.bounds,
         frame: &shadow.frame,
         steps: steps_per_ray,
     }
@@ -161,8 +174,8 @@ pub fn march_shadow_map(
 }
 
 /// Ray marcher casting a real shadow ray through `bvh` at every step (no shadow-map aliasing);
-/// `bounds` are the scene bounds (where escaping view rays end, and the window the light texture is
-/// projected over, as in [`super::render_shadow_map`]).
+/// `bounds` are the scene bounds (the window the light texture is projected over, as in
+/// [`super::render_shadow_map`]).
 pub fn march_bvh(
     cam: &ViewCamera,
     depth: &DistanceImage,
@@ -173,6 +186,5 @@ pub fn march_bvh(
     steps_per_ray: usize,
 ) -> RgbImage {
     let frame = LightFrame::new(light, bounds);
-    MarchCtx { cam, depth, light, vis: Visibility::Bvh(bvh), medium, bounds, frame: &frame, steps: steps_per_ray }
-        .image()
+    MarchCtx { cam, depth, light, vis: Visibility::Bvh(bvh), medium, frame: &frame, steps: steps_per_ray }.image()
 }

@@ -24,8 +24,8 @@ struct EpiParams {
     fr_u: vec4<f32>,      // xyz ax_u (ortho) or right (persp), w extent_u (ortho) or tan_half (persp)
     fr_v: vec4<f32>,      // xyz ax_v or up, w extent_v
     fr_dir: vec4<f32>,    // xyz light travel direction (ortho) or forward (persp), w depth bias
-    bmin: vec4<f32>,      // xyz scene bounds min, w shadow-map resolution
-    bmax: vec4<f32>,      // xyz scene bounds max, w 1 when the light is textured
+    bmin: vec4<f32>,      // xyz medium region min, w shadow-map resolution
+    bmax: vec4<f32>,      // xyz medium region max, w 1 when the light is textured
     sigma_s: vec4<f32>,   // xyz scattering, w HG g (clamped to ±0.999)
     sigma_t: vec4<f32>,   // xyz extinction, w Δγ (bin width)
     epi: vec4<f32>,       // xy epipole (raster), zw reference screen direction
@@ -33,7 +33,7 @@ struct EpiParams {
     n0: vec4<u32>,        // x slices, y γ bins, z SVD rank, w kernels (1 grey, 3 per channel)
     n1: vec4<u32>,        // x sub-samples per bin (1 or 4), y max depth modes, z ring steps, w channels in the tree
     n2: vec4<u32>,        // x texture width, y texture height, z first slice of this chunk, w β samples in all
-    n3: vec4<u32>,        // x slices in this chunk, y 1 when untextured directional, z jitter key lo, w jitter key hi
+    n3: vec4<u32>,        // x slices in this chunk, y 0 (unused), z jitter key lo, w jitter key hi
     n4: vec4<u32>,        // x most β samples in one slice, y β samples per integration block, z blocks per slice, w 0
 }
 
@@ -76,19 +76,16 @@ fn project_dir(d: vec3<f32>) -> vec4<f32> {
     return vec4<f32>((sx + 1.0) * 0.5 * P.cam_right.w, (1.0 - sy) * 0.5 * P.cam_up.w, select(0.0, 1.0, z > 0.0), 1.0);
 }
 
-// effects::epipolar::view_extent: the ray's depth, or where it leaves the scene bounds (depth < 0).
-fn view_extent(dir: vec3<f32>, depth: f32) -> f32 {
-    if depth >= 0.0 {
-        return depth;
-    }
-    let o = P.cam_pos.xyz;
-    var t0 = 0.0;
+// The parameter interval (lo, hi) of the line o + t·d inside the medium region; lo > hi when it misses
+// (god_rays::clip_line).
+fn clip_region(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
+    var t0 = -3.0e38;
     var t1 = 3.0e38;
     for (var a = 0u; a < 3u; a++) {
-        let v = dir[a];
+        let v = d[a];
         if abs(v) < 1e-30 {
             if o[a] < P.bmin[a] || o[a] > P.bmax[a] {
-                return 0.0;
+                return vec2<f32>(1.0, -1.0);
             }
             continue;
         }
@@ -97,7 +94,20 @@ fn view_extent(dir: vec3<f32>, depth: f32) -> f32 {
         t0 = max(t0, min(ta, tb));
         t1 = min(t1, max(ta, tb));
     }
-    return select(0.0, t1, t1 > t0 && t1 < 3.0e38);
+    return vec2<f32>(t0, t1);
+}
+
+// god_rays::view_segment's end for an eye inside the region: the ray's depth (< 0: none) or where it
+// leaves the region, whichever comes first.
+fn view_extent(dir: vec3<f32>, depth: f32) -> f32 {
+    let c = clip_region(P.cam_pos.xyz, dir);
+    if c.y < c.x || c.y <= 0.0 {
+        return 0.0;
+    }
+    if depth >= 0.0 {
+        return min(depth, c.y);
+    }
+    return c.y;
 }
 
 // Geo::gamma_end: γ where the view ray v (angle beta) of length d ends.
@@ -147,9 +157,11 @@ fn lit(p: vec3<f32>) -> bool {
     return b.x < 0.5 || b.y < 0.0 || b.z < b.y + P.fr_dir.w;
 }
 
-// effects::epipolar::modulation: texture × spot falloff at p (1 for an untextured directional light).
+// god_rays::modulation: texture × spot falloff at p, times for a directional light its attenuation
+// e^{−σ_t a} from where its ray through p enters the medium region (EpiMedium::light_entry; 0 when the
+// ray misses the region).
 fn modulation(p: vec3<f32>) -> vec3<f32> {
-    var fall = 1.0;
+    var fall = vec3<f32>(1.0);
     if is_spot() {
         let r = p - P.geo_pos.xyz;
         let len = length(r);
@@ -159,13 +171,19 @@ fn modulation(p: vec3<f32>) -> vec3<f32> {
         let ci = P.light_dir.w;
         let co = P.light_str.w;
         let t = clamp((dot(r / len, P.light_dir.xyz) - co) / max(ci - co, 1e-6), 0.0, 1.0);
-        fall = t * t;
+        fall = vec3<f32>(t * t);
+    } else {
+        let c = clip_region(p, P.geo_t.xyz);
+        if c.y < c.x {
+            return vec3<f32>(0.0);
+        }
+        fall = exp(-P.sigma_t.xyz * c.y);
     }
-    if fall <= 0.0 {
+    if all(fall <= vec3<f32>(0.0)) {
         return vec3<f32>(0.0);
     }
     if P.bmax.w < 0.5 {
-        return vec3<f32>(fall);
+        return fall;
     }
     let f = frame_uvz(p);
     if f.w < 0.5 {

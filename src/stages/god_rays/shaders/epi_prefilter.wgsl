@@ -11,8 +11,8 @@
 //   6  nbins   storage  array<u32> [slices]         read: γ bins the slice uses
 //   7  events  storage  array<u32> [chunk·bins·4]   write: per bin up to 4 modes, each
 //                                                   (β index << 4) | exact << 3 | sub-sample count, 0 = none
-//   8  modul   storage  array<vec4<f32>> [chunk·bins] write: modulation at the bin's centre (not when
-//                                                   the light is an untextured directional one)
+//   8  modul   storage  array<vec4<f32>> [chunk·bins] write: modulation at the bin's centre (texture ×
+//                                                   falloff × a directional light's entry attenuation)
 
 @group(0) @binding(3) var<storage, read> slices: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> offs: array<u32>;
@@ -165,7 +165,5 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     if applied == sub && out > 0u {
         events[base + out - 1u] |= 8u;
     }
-    if P.n3.y == 0u {
-        modul[local * bins + j] = vec4<f32>(modulation(light_point(u, (f32(j) + 0.5) * dg)), 0.0);
-    }
+    modul[local * bins + j] = vec4<f32>(modulation(light_point(u, (f32(j) + 0.5) * dg)), 0.0);
 }

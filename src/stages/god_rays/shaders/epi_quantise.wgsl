@@ -32,10 +32,7 @@ fn lane_value(local: u32, j: u32, l: u32) -> f32 {
     let c = l / rank;
     let i = l % rank;
     let k = min(c, P.n0.w - 1u);
-    var m = 1.0;
-    if P.n3.y == 0u {
-        m = modul[local * bins + j][c];
-    }
+    let m = modul[local * bins + j][c];
     let v = gfn[(k * rank + i) * bins + j] * m * P.sigma_t.w;
     return select(0.0, v, abs(v) < 3.0e38);
 }
