@@ -252,6 +252,12 @@ impl SceneBvh {
         SceneBvh { all, boundary, offsets, shading, bounds_medium, stats }
     }
 
+    /// Every triangle the BVH intersects (world-space vertices, metres), in BVH slot order: what a
+    /// rasteriser needs to draw the same occluders the ray queries see.
+    pub fn triangles(&self) -> impl Iterator<Item = [[f32; 3]; 3]> + '_ {
+        self.all.tris.iter().map(|t| t.v)
+    }
+
     /// Counts and timing of the build.
     pub fn stats(&self) -> BuildStats {
         self.stats

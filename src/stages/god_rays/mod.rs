@@ -75,7 +75,7 @@ use crate::scene::{Boundary, Density, LightKind, Scene};
 
 pub use bench::{BenchReport, ErrorTimePoint, bench, error_vs_time, write_error_plot};
 pub use reference::{march_bvh, march_shadow_map};
-pub use shadow_map::{LightFrame, ShadowMap, render_shadow_map};
+pub use shadow_map::{LightFrame, ShadowMap, render_shadow_map, trace_shadow_map};
 
 /// A light for the epipolar effect (world space, metres, unit directions).
 #[derive(Debug, Clone, PartialEq)]

@@ -556,3 +556,47 @@ fn light_entry_is_the_distance_to_the_box_towards_the_light() {
     assert!((m.light_attenuation(-10.0)[1] - 1f64.exp()).abs() < 1e-12);
     assert_eq!(medium(1e300, 1e300, 0.0).light_attenuation(-1e10), [0.0; 3]);
 }
+
+#[test]
+fn rasterised_shadow_maps_equal_the_traced_ones() {
+    // The rasteriser against the BVH tracer, texel by texel: directional (epipole on screen and light
+    // from behind), a spot light whose frustum crosses geometry beside and behind it, and the window
+    // room's sun (its wall with a grid of holes).
+    let spheres = sphere_scene();
+    let room_scene =
+        crate::scene::Scene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/window_room.gltf"))
+            .unwrap();
+    let room = SceneBvh::build(&room_scene);
+    let sun = EpiLight::from_scene(&room_scene).unwrap();
+    let room_bounds = room_scene.bounds().unwrap();
+    for (name, bvh, light, bounds, res) in [
+        ("front", &spheres, dir_light([0.15, 0.1, -1.0]), BOX, 512),
+        ("behind", &spheres, dir_light([0.3, 0.9, 0.3]), BOX, 300),
+        ("spot", &spheres, spot_light(), BOX, 256),
+        ("window room", &room, sun, room_bounds, 1024),
+    ] {
+        let (r, t) = (render_shadow_map(bvh, &light, bounds, res), trace_shadow_map(bvh, &light, bounds, res));
+        assert_eq!((r.frame, r.bias, r.bounds), (t.frame, t.bias, t.bounds));
+        let (mut differ, mut hit, mut worst) = (0usize, 0usize, 0.0f64);
+        for (a, b) in r.depth.iter().zip(&t.depth) {
+            match (a.is_finite(), b.is_finite()) {
+                (true, true) => {
+                    hit += 1;
+                    // Relative to the bounds' diagonal: the depth bias is 10⁻⁴ of it.
+                    let rel = f64::from((a - b).abs()) / (r.bias * 1e4);
+                    if rel > 1e-4 {
+                        differ += 1;
+                    } else {
+                        worst = worst.max(rel);
+                    }
+                }
+                (false, false) => {}
+                _ => differ += 1,
+            }
+        }
+        let n = r.depth.len();
+        assert!(hit > n / 20, "{name}: only {hit} texels see geometry");
+        assert!(differ * 2000 <= n, "{name}: {differ} of {n} texels differ");
+        assert!(worst < 1e-5, "{name}: depth differs by {worst} of the diagonal");
+    }
+}
