@@ -5,7 +5,8 @@
 //! global medium) → a [`BenchReport`]: per thread count (1, 2) the (knob, ms, error) points of both
 //! methods against a converged reference, the speed-up at equal error (log-log interpolation of the
 //! marcher's curve), the per-phase milliseconds of the default setting, and the time-vs-resolution
-//! slopes (least squares in log-log) for both methods.
+//! slopes (least squares in log-log) for both methods, and the split of a whole frame (shadow map,
+//! epipolar, composite) at 640×480 and 1280×720 on 2 threads.
 //!
 //! **Error metric.** Relative RMSE of the in-scattered image against the converged reference over all
 //! pixels and channels: `sqrt(Σ (x − r)²) / sqrt(Σ r²)`. The reference is the BVH ray marcher (real
@@ -96,6 +97,70 @@ pub struct BenchReport {
     pub runs: Vec<ThreadRun>,
     /// Scaling (single thread).
     pub scaling: Vec<Scaling>,
+    /// Whole frames (2 threads): what a real-time frame costs at game resolutions.
+    pub frames: Vec<FrameSplit>,
+}
+
+/// The cost of one whole god-ray frame on 2 threads (best of 3): the shadow map (rasterised, at the
+/// bench's resolution), the epipolar in-scatter (default settings) and the composite over a colour
+/// image; the camera's distance buffer is the engine's G-buffer input, timed beside it, not in the total.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameSplit {
+    /// Raster size.
+    pub width: usize,
+    /// Raster height.
+    pub height: usize,
+    /// Shadow map \[ms\].
+    pub shadow_ms: f64,
+    /// Epipolar in-scatter and transmittance \[ms\].
+    pub epipolar_ms: f64,
+    /// Composite `colour · T + inscatter` \[ms\].
+    pub composite_ms: f64,
+    /// Shadow map + epipolar + composite \[ms\].
+    pub total_ms: f64,
+    /// The camera's distance buffer, ray traced by voltab (an engine rasterises it) \[ms\].
+    pub gbuffer_ms: f64,
+}
+
+/// [`FrameSplit`] of `inp`'s scene at `width × height` with a `shadow_res²` shadow map, on the
+/// current rayon pool.
+pub fn frame_split(inp: &Inputs, width: usize, height: usize, shadow_res: usize) -> FrameSplit {
+    let best = |f: &mut dyn FnMut() -> f64| (0..3).map(|_| f()).fold(f64::INFINITY, f64::min);
+    let mut cam = inp.cam;
+    cam.width = width;
+    cam.height = height;
+    let timed = |f: &mut dyn FnMut()| {
+        let t = Instant::now();
+        f();
+        t.elapsed().as_secs_f64() * 1e3
+    };
+    let mut depth = None;
+    let gbuffer_ms = best(&mut || timed(&mut || depth = Some(distance_image(&inp.bvh, &cam))));
+    let depth = depth.unwrap_or_else(|| distance_image(&inp.bvh, &cam));
+    let mut shadow = None;
+    let shadow_ms =
+        best(&mut || timed(&mut || shadow = Some(render_shadow_map(&inp.bvh, &inp.light, inp.bounds, shadow_res))));
+    let shadow = shadow.unwrap_or_else(|| render_shadow_map(&inp.bvh, &inp.light, inp.bounds, shadow_res));
+    let opts = EpipolarOptions::default();
+    let mut out = None;
+    let epipolar_ms =
+        best(&mut || timed(&mut || out = Some(render(&cam, &depth, &inp.light, &shadow, &inp.medium, &opts))));
+    let out = out.unwrap_or_else(|| render(&cam, &depth, &inp.light, &shadow, &inp.medium, &opts));
+    let colour = crate::render::Image::filled(width, height, [0.5f32; 3]);
+    let composite_ms = best(&mut || {
+        timed(&mut || {
+            std::hint::black_box(super::composite(&colour, &out));
+        })
+    });
+    FrameSplit {
+        width,
+        height,
+        shadow_ms,
+        epipolar_ms,
+        composite_ms,
+        total_ms: shadow_ms + epipolar_ms + composite_ms,
+        gbuffer_ms,
+    }
 }
 
 /// The inputs of one measurement: scene products that are not timed.
@@ -310,7 +375,10 @@ pub fn bench(scene_path: &Path, quick: bool) -> Result<BenchReport, String> {
         Scaling { method: "epipolar".into(), slope: loglog_slope(&epi), points: epi },
         Scaling { method: "raymarch".into(), slope: loglog_slope(&rm), points: rm },
     ];
-    Ok(BenchReport { width: w, height: h, shadow_resolution: shadow_res, reference_steps, runs, scaling })
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().map_err(|e| e.to_string())?;
+    let sizes: &[(usize, usize)] = if quick { &[(160, 120)] } else { &[(640, 480), (1280, 720)] };
+    let frames = pool.install(|| sizes.iter().map(|&(fw, fh)| frame_split(&inp, fw, fh, shadow_res)).collect());
+    Ok(BenchReport { width: w, height: h, shadow_resolution: shadow_res, reference_steps, runs, scaling, frames })
 }
 
 /// Writes the error-vs-time plot (log-log, one series per method) of `points` to `path`.
@@ -385,6 +453,15 @@ impl fmt::Display for BenchReport {
                     s.speedup
                 )?;
             }
+        }
+        writeln!(f, "\nwhole frame (2 threads, best of 3; shadow map {}² rasterised):", self.shadow_resolution)?;
+        for fr in &self.frames {
+            writeln!(
+                f,
+                "  {}×{}: shadow map {:.1} ms + epipolar {:.1} ms + composite {:.1} ms = {:.1} ms \
+                 (camera distance buffer, the engine's G-buffer, ray traced here: {:.1} ms)",
+                fr.width, fr.height, fr.shadow_ms, fr.epipolar_ms, fr.composite_ms, fr.total_ms, fr.gbuffer_ms
+            )?;
         }
         writeln!(f, "\nscaling (1 thread; side, γ bins and steps ∝ k):")?;
         for s in &self.scaling {

@@ -480,6 +480,12 @@ fn quick_bench_on_the_window_room() {
     let e2: Vec<f64> = report.runs[1].points.iter().map(|p| p.error).collect();
     assert_eq!(e1, e2);
     assert!(report.scaling.iter().all(|s| s.slope.is_finite()));
+    // The whole-frame split adds up and is printed.
+    assert_eq!(report.frames.len(), 1);
+    let fr = report.frames[0];
+    assert_eq!(fr.total_ms, fr.shadow_ms + fr.epipolar_ms + fr.composite_ms);
+    assert!(fr.shadow_ms > 0.0 && fr.epipolar_ms > 0.0 && fr.gbuffer_ms > 0.0, "{fr:?}");
+    assert!(report.to_string().contains("whole frame"));
     // Equal-error interpolation on a known power law: error = 1/steps, time = steps ms.
     let pts: Vec<bench::ErrorTimePoint> = [(4.0, 0.25), (16.0, 0.0625), (64.0, 1.0 / 64.0)]
         .iter()
