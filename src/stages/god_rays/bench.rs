@@ -188,7 +188,7 @@ impl Inputs {
         let cam = ViewCamera::from_scene(camera, width, height)
             .ok_or("the scene's camera is not a usable perspective camera")?;
         let light = EpiLight::from_scene(scene).ok_or("the scene has no directional or spot light")?;
-        let medium = EpiMedium::from_scene(scene).ok_or("the scene has no homogeneous global medium")?;
+        let medium = EpiMedium::from_scene(scene).ok_or_else(|| EpiMedium::refusal(scene))?;
         let bounds = scene.bounds().ok_or("the scene is empty")?;
         let bvh = SceneBvh::build(scene);
         let depth = distance_image(&bvh, &cam);

@@ -188,6 +188,30 @@ impl EpiMedium {
             .map(|m| EpiMedium { sigma_s: m.sigma_s, sigma_a: m.sigma_a, g: (m.g[0] + m.g[1] + m.g[2]) / 3.0, region })
     }
 
+    /// Why `scene` has no medium [`EpiMedium::from_scene`] accepts: each medium it has and what rules it
+    /// out (the field to change), or that it has none.
+    pub fn refusal(scene: &Scene) -> String {
+        if scene.media.is_empty() {
+            return format!("{} has no participating medium", scene.source.display());
+        }
+        let reasons: Vec<String> = scene
+            .media
+            .iter()
+            .map(|m| match (&m.boundary, &m.density) {
+                (Boundary::Global, Density::Homogeneous) => format!("medium {:?} fills a scene without extent", m.name),
+                (Boundary::Global, _) => format!(
+                    "medium {:?} has a height-varying density (exponential height fog): the god rays integrate a homogeneous medium (density Homogeneous); ImageFog renders height fog",
+                    m.name
+                ),
+                (Boundary::Mesh(k), _) => format!(
+                    "medium {:?} is bounded by mesh {k}: the god rays take a global medium (it fills the scene's padded bounds), not a fog volume bounded by a mesh (not supported yet)",
+                    m.name
+                ),
+            })
+            .collect();
+        format!("{}: no homogeneous global medium ({})", scene.source.display(), reasons.join("; "))
+    }
+
     /// Whether `p` lies in [`EpiMedium::region`] (boundary included).
     pub fn contains(&self, p: DVec3) -> bool {
         (0..3).all(|a| p[a] >= self.region.0[a] && p[a] <= self.region.1[a])

@@ -183,8 +183,9 @@ pub fn render_shadow_map(
     let bands = n.div_ceil(band);
     let mut binned: Vec<Vec<u32>> = vec![Vec::new(); bands];
     for (k, t) in tris.iter().enumerate() {
-        for b in t.rows.0 / band..=(t.rows.1 / band).min(bands - 1) {
-            binned[b].push(k as u32);
+        let last = (t.rows.1 / band).min(bands - 1);
+        for list in &mut binned[t.rows.0 / band..=last] {
+            list.push(k as u32);
         }
     }
     let mut depth = vec![f32::INFINITY; n * n];
@@ -370,12 +371,12 @@ impl Projected {
                     hi = f64::NEG_INFINITY;
                 }
             }
-            if !(hi >= lo) {
+            if hi < lo || hi.is_nan() || lo.is_nan() {
                 continue;
             }
             let (i0, i1) = ((lo - 0.5).ceil().max(0.0) as usize, ((hi - 0.5).floor().min(nf - 1.0)) as usize);
             let row = &mut rows[(j - j0) * n..(j - j0 + 1) * n];
-            for i in i0..=i1.min(n - 1) {
+            for (i, px) in row.iter_mut().enumerate().take(i1.min(n - 1) + 1).skip(i0) {
                 let cx = i as f64 + 0.5;
                 let t = match depth {
                     Depth::Affine(g) => g[0] * cx + g[1] * cy + g[2],
@@ -390,8 +391,8 @@ impl Projected {
                 };
                 if t > 0.0 && t.is_finite() {
                     let t = t as f32;
-                    if t < row[i] {
-                        row[i] = t;
+                    if t < *px {
+                        *px = t;
                     }
                 }
             }

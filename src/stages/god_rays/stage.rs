@@ -2,9 +2,10 @@
 //! rectification and partial-sum trees, as EXR + PNG, with an optional brute-force comparison.
 //!
 //! **Input.** A scene file (relative to the pipeline file) with a perspective camera, a directional or
-//! spot light and a homogeneous global medium. **Phases.** Import → BVH → G-buffer of the camera
-//! ([`view`]: vacuum colour and distance, voltab's own ray tracer) → light shadow map
-//! ([`epipolar::render_shadow_map`]) → [`epipolar::render`] (rectification into epipolar slices with the
+//! spot light and a homogeneous global medium (it fills the scene's padded bounds; the sun is
+//! attenuated from where it enters them). **Phases.** Import → BVH → G-buffer of the camera
+//! ([`view`]: vacuum colour and distance, voltab's own ray tracer) → light shadow map (rasterised,
+//! [`epipolar::render_shadow_map`]) → [`epipolar::render`] (rectification into epipolar slices with the
 //! sinh distribution, Sec. 8; Fenwick half-tree integration of the rank-N SVD factorisation of
 //! `I(γ, β)`, Secs. 4–6; depth-mode prefiltering, Sec. 7; ray marching in the disc around the epipole;
 //! unrectification) → composite `colour·T + in-scatter` → `<out>/<stage>/godrays.exr` (layers
@@ -166,8 +167,8 @@ impl EpipolarShadows {
         })?;
         let medium = EpiMedium::from_scene(scene).ok_or_else(|| {
             fail(
-                format!("{} has no homogeneous global medium", scene.source.display()),
-                "add a homogeneous global medium (room or atmosphere fog) to the scene",
+                EpiMedium::refusal(scene),
+                "give the scene a homogeneous global medium (room or atmosphere fog, density Homogeneous)",
             )
         })?;
         Ok((light, medium))

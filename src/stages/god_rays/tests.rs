@@ -606,3 +606,42 @@ fn rasterised_shadow_maps_equal_the_traced_ones() {
         assert!(worst < 1e-5, "{name}: depth differs by {worst} of the diagonal");
     }
 }
+
+#[test]
+fn media_the_god_rays_cannot_take_are_named_with_the_reason() {
+    use crate::scene::{Boundary, Density, Medium};
+    let mut scene = procedural::scene(vec![quad("floor", 0.0, -1.0, 1.0, -1.0, 1.0)]);
+    assert!(EpiMedium::refusal(&scene).contains("no participating medium"));
+    let fog = |name: &str, density, boundary| Medium {
+        name: name.into(),
+        sigma_s: [0.1; 3],
+        sigma_a: [0.0; 3],
+        g: [0.3; 3],
+        density,
+        boundary,
+    };
+    let height = Density::ExponentialHeight { rho: 1.0, falloff: 0.5, direction: [0.0, 1.0, 0.0], offset: [0.0; 3] };
+    scene.media = vec![fog("haze", height, Boundary::Global), fog("volume", Density::Homogeneous, Boundary::Mesh(0))];
+    assert!(EpiMedium::from_scene(&scene).is_none());
+    let why = EpiMedium::refusal(&scene);
+    assert!(why.contains("\"haze\"") && why.contains("height") && why.contains("ImageFog"), "{why}");
+    assert!(why.contains("\"volume\"") && why.contains("bounded by mesh 0"), "{why}");
+    // A homogeneous global medium is taken, over the scene's padded bounds.
+    scene.media.push(fog("room", Density::Homogeneous, Boundary::Global));
+    let m = EpiMedium::from_scene(&scene).unwrap();
+    assert_eq!(Some(m.region), scene.global_medium_bounds());
+}
+
+#[test]
+fn a_zero_thickness_fog_box_scatters_nothing() {
+    let bvh = empty_bvh();
+    let cam = camera(32, 24);
+    let depth = distance_image(&bvh, &cam);
+    let light = dir_light([0.1, 0.6, -0.4]);
+    let shadow = render_shadow_map(&bvh, &light, BOX, 64);
+    // A slab of zero thickness across the view: every view ray crosses it in a single point.
+    let m = EpiMedium { region: ([-20.0, -20.0, -8.0], [20.0, 20.0, -8.0]), ..medium(0.5, 0.1, 0.5) };
+    let out = render(&cam, &depth, &light, &shadow, &m, &EpipolarOptions::default());
+    assert!(out.inscatter.data.iter().all(|p| *p == [0.0; 3]));
+    assert!(out.transmittance.data.iter().all(|p| *p == [1.0; 3]));
+}
