@@ -94,6 +94,16 @@ pub struct GodRaysSummary {
     pub samples: usize,
     /// Pixels marched around the epipole.
     pub ring_pixels: usize,
+    /// Pixels marched at silhouettes no slice sample matches.
+    #[serde(default)]
+    pub edge_pixels: usize,
+    /// Pixels marched because their slices need a light gain above `MAX_LIGHT_GAIN` or the camera is
+    /// outside the fog's box.
+    #[serde(default)]
+    pub gain_pixels: usize,
+    /// The box the fog fills (`min`, `max` corners) \[m\]; the sun is attenuated from where it enters it.
+    #[serde(default)]
+    pub fog_region: [[f64; 3]; 2],
     /// Relative residual of the rank-N SVD of I(γ, β).
     pub svd_residual: f64,
     /// Mean in-scattered radiance per channel \[W/(m²·sr)\].
@@ -269,6 +279,9 @@ impl EpipolarShadows {
             slices: s.slices,
             samples: s.samples,
             ring_pixels: s.ring_pixels,
+            edge_pixels: s.edge_pixels,
+            gain_pixels: s.gain_pixels,
+            fog_region: [medium.region.0, medium.region.1],
             svd_residual: s.svd_residual,
             mean_inscatter: [0, 1, 2].map(|c| out.inscatter.data.iter().map(|p| f64::from(p[c])).sum::<f64>() / n),
             reference,
