@@ -83,9 +83,16 @@ def test_thick_fog_meets_the_per_pixel_target(stress):
     assert epi["rel_rmse"] is None or epi["rel_rmse"] <= 0.05, epi
 
 
-@pytest.mark.xfail(strict=True, reason="issue 32: the grazing sun measures 17.5 % [15.6, 19.2] (floor 7.3 %), mean "
-                   "×1.065 while the BVH marcher's mean is ×0.997: the epipolar image over-brightens thin shafts")
-def test_grazing_sun_meets_the_targets(stress):
+def test_grazing_sun_mean_is_within_3_percent(stress):
+    # Measured ×1.065 while a view-ray sample took the depth of the pixel it falls in: on the ceiling,
+    # which the camera sees at a grazing angle, samples ran up to half a pixel's depth change past the
+    # surface into the lit fog above it. With the depth blended between pixels of one surface: ×1.025.
+    epi = stress["grazing"]["epipolar"]
+    assert abs(epi["method_mean"] / epi["reference_mean"] - 1) <= 0.03, epi
+
+
+@pytest.mark.xfail(strict=True, reason="issue 32: the grazing sun measures 11.4 % [8.1, 13.9] per pixel (floor "
+                   "7.3 %; 17.5 % before the depth blend), against ≤ 5 %")
+def test_grazing_sun_meets_the_per_pixel_target(stress):
     epi = stress["grazing"]["epipolar"]
     assert epi["rel_rmse"] is None or epi["rel_rmse"] <= 0.05, epi
-    assert abs(epi["method_mean"] / epi["reference_mean"] - 1) <= 0.03, epi

@@ -545,6 +545,33 @@ pub fn composite(colour: &RgbImage, out: &EpipolarOutput) -> RgbImage {
     img
 }
 
+/// Distance along the view direction that projects to raster position `q` (pixel centres at `i + ½`):
+/// the bilinear blend of the four surrounding pixels when they see one surface (all finite, the
+/// largest at most 1.1× the smallest), else the containing pixel's (across a silhouette or the sky
+/// nothing is blended). A view-ray sample between pixel centres on a grazing surface then ends on the
+/// surface instead of up to half a pixel's depth change beyond it — through it, into fog the light
+/// may reach behind it (the leak the grazing-sun stress case of issue 32 measured).
+pub(crate) fn sample_depth(depth: &DistanceImage, q: [f64; 2]) -> f32 {
+    let (w, h) = (depth.width, depth.height);
+    if w == 0 || h == 0 {
+        return f32::INFINITY;
+    }
+    let near = depth_at(depth, q[0].max(0.0) as usize, q[1].max(0.0) as usize);
+    let (fx, fy) = ((q[0] - 0.5).clamp(0.0, (w - 1) as f64), (q[1] - 0.5).clamp(0.0, (h - 1) as f64));
+    let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+    let d = [depth.at(x0, y0), depth.at(x1, y0), depth.at(x0, y1), depth.at(x1, y1)];
+    let (lo, hi) = d.iter().fold((f32::INFINITY, 0.0f32), |(a, b), &v| (a.min(v), b.max(v)));
+    if !(lo > 0.0 && hi.is_finite() && hi <= 1.1 * lo) {
+        return near;
+    }
+    let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
+    let d = d.map(f64::from);
+    let top = (1.0 - tx) * d[0] + tx * d[1];
+    let bottom = (1.0 - tx) * d[2] + tx * d[3];
+    ((1.0 - ty) * top + ty * bottom) as f32
+}
+
 /// Depth of pixel `(x, y)` with clamped indices (`∞` for an empty image).
 pub(crate) fn depth_at(depth: &DistanceImage, x: usize, y: usize) -> f32 {
     if depth.width == 0 || depth.height == 0 {

@@ -22,7 +22,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::integrate::SliceResult;
-use super::{DistanceImage, EpiLight, EpipolarOptions, ViewCamera, depth_at, view_segment};
+use super::{DistanceImage, EpiLight, EpipolarOptions, ViewCamera, sample_depth, view_segment};
 
 /// The epipolar geometry of the light relative to the eye.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -184,7 +184,7 @@ impl Setup {
                     let beta = l.beta(k);
                     let v = beta.cos() * t + beta.sin() * l.u;
                     let dpx = match cam.project_dir(v) {
-                        Some((q, true)) => depth_at(depth, q[0].max(0.0) as usize, q[1].max(0.0) as usize),
+                        Some((q, true)) => sample_depth(depth, q),
                         _ => f32::INFINITY,
                     };
                     let (_, ext) = view_segment(eye, v, dpx, region);

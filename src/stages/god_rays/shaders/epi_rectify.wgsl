@@ -35,6 +35,29 @@ fn slice_of(i: u32) -> u32 {
     return lo;
 }
 
+// god_rays::sample_depth: the bilinear blend of the four pixels around raster position q when they see
+// one surface (all hit, the largest ≤ 1.1× the smallest), else the containing pixel's distance.
+fn sample_depth(q: vec2<f32>) -> f32 {
+    let w = u32(P.cam_right.w);
+    let h = u32(P.cam_up.w);
+    let near = depth[u32(clamp(q.y, 0.0, f32(h - 1u))) * w + u32(clamp(q.x, 0.0, f32(w - 1u)))];
+    let fx = clamp(q.x - 0.5, 0.0, f32(w - 1u));
+    let fy = clamp(q.y - 0.5, 0.0, f32(h - 1u));
+    let x0 = u32(floor(fx));
+    let y0 = u32(floor(fy));
+    let x1 = min(x0 + 1u, w - 1u);
+    let y1 = min(y0 + 1u, h - 1u);
+    let d = vec4<f32>(depth[y0 * w + x0], depth[y0 * w + x1], depth[y1 * w + x0], depth[y1 * w + x1]);
+    let lo = min(min(d.x, d.y), min(d.z, d.w));
+    let hi = max(max(d.x, d.y), max(d.z, d.w));
+    if !(lo > 0.0 && hi <= 1.1 * lo) {
+        return near;
+    }
+    let tx = fx - f32(x0);
+    let ty = fy - f32(y0);
+    return mix(mix(d.x, d.y, tx), mix(d.z, d.w, tx), ty);
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = thread_index(wid, nwg, lid);
@@ -52,11 +75,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let q = project_dir(v);
     var dpx = -1.0;
     if q.w > 0.5 && q.z > 0.5 {
-        let w = u32(P.cam_right.w);
-        let h = u32(P.cam_up.w);
-        let x = u32(clamp(q.x, 0.0, f32(w - 1u)));
-        let y = u32(clamp(q.y, 0.0, f32(h - 1u)));
-        dpx = depth[y * w + x];
+        dpx = sample_depth(q.xy);
     }
     let ext = view_extent(v, dpx);
     let ge = gamma_end(v, beta, ext);
