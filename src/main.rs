@@ -991,17 +991,20 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                 let p = load(&pipeline)?;
                 let is_stage = |o: &String| p.stages().iter().any(|s| s.id() == o.as_str());
                 let (stage_only, table_only): (Vec<String>, Vec<String>) = only.iter().cloned().partition(is_stage);
-                if only.is_empty() || !table_only.is_empty() {
-                    let (text, r) = voltab::shard::bench::run(&p, &table_only, &|m| {
-                        if progress {
-                            eprintln!("{m}");
-                        }
-                    })
-                    .map_err(|e| anyhow::anyhow!(e))?;
+                let say = |m: &str| {
+                    if progress {
+                        eprintln!("{m}");
+                    }
+                };
+                // Prints a measurement's text (unless --json) and keeps its rows.
+                let mut keep = |(text, r): (String, Vec<_>)| {
                     if !json {
                         print!("{text}");
                     }
                     rows.extend(r);
+                };
+                if only.is_empty() || !table_only.is_empty() {
+                    keep(voltab::shard::bench::run(&p, &table_only, &say).map_err(|e| anyhow::anyhow!(e))?);
                 }
                 // The lightmap bakes as tiles (their tables compiled into --tables first).
                 if (only.is_empty() || !stage_only.is_empty())
@@ -1014,16 +1017,7 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                         progress: false,
                         device: &cpu_device,
                     };
-                    let (text, r) = voltab::shard::bench::bake(&p, &ctx, &stage_only, &|m| {
-                        if progress {
-                            eprintln!("{m}");
-                        }
-                    })
-                    .map_err(|e| anyhow::anyhow!(e))?;
-                    if !json {
-                        print!("{text}");
-                    }
-                    rows.extend(r);
+                    keep(voltab::shard::bench::bake(&p, &ctx, &stage_only, &say).map_err(|e| anyhow::anyhow!(e))?);
                 }
             } else if gpu {
                 let (device, message) = voltab::render::gpu::select(voltab::render::gpu::DeviceRequest::Gpu)

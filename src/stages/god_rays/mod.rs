@@ -228,10 +228,13 @@ impl EpiMedium {
     /// Per-channel light attenuation `e^{−σ_t a}` for a light path of length `a` in the medium
     /// (negative `a`: gain, see the module doc); 0 for a non-finite `a`.
     pub fn light_attenuation(&self, a: f64) -> [f64; 3] {
-        self.sigma_t().map(|s| {
+        let att = |s: f64| {
             let v = (-s * a).exp();
             if v.is_finite() { v } else { 0.0 }
-        })
+        };
+        let st = self.sigma_t();
+        // Grey fog (the common case, once per γ bin of every slice): one exponential.
+        if st[0] == st[1] && st[1] == st[2] { [att(st[0]); 3] } else { st.map(att) }
     }
 
     /// Extinction per channel (negative or NaN inputs count as 0).
