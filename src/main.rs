@@ -223,8 +223,9 @@ enum Command {
         #[arg(long)]
         bake: bool,
         /// Only the real-time effect benchmarks of the pipeline's EpipolarShadows and ImageFog stages: the
-        /// epipolar speed-up over ray marching at equal error (1 and 2 threads) and the time-vs-resolution
-        /// slopes; fog frame times at 720p and 1080p and the speed-up over the gathering reference.
+        /// epipolar speed-up over ray marching at equal error (1 and 2 threads), the time-vs-resolution
+        /// slopes and the whole god-ray frame (shadow map + epipolar + composite) at 640×480 and 1280×720;
+        /// fog frame times at 720p and 1080p and the speed-up over the gathering reference.
         #[arg(long)]
         effects: bool,
         /// Only the translucent-media benchmark of the pipeline's TranslucentRender stages: wang2018 Table 3's
