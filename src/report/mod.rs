@@ -5,6 +5,7 @@
 //! Output: `report.json` (rows: table, budget, ms, bytes, error per curve, plus a machine note),
 //! `report.md`, and one log-log PNG of error against time per table. Plots are made from the rows.
 
+pub mod noisy;
 pub mod plot;
 
 use std::path::{Path, PathBuf};

@@ -1,0 +1,198 @@
+//! Errors against a noisy reference that cannot flatter (issue 30): the one statistic every stage's
+//! internal comparison reports, the same one `voltab validate`'s harness computes against Mitsuba
+//! (`python/mitsuba_ref/compare.py`).
+//!
+//! **Input → output.** A method's values `a`, the reference's means `r` and the variance of each mean
+//! `var_r` (per item: pixel, texel or point, channels flattened) → a [`NoiseCorrected`] error with its
+//! floor, 95 % interval and report wording.
+//!
+//! **The statistic.** `E[(a − r)²] = (a − r_true)² + Var(r)`, so the raw MSE overstates the error by
+//! the reference's noise; the corrected MSE is `mean((a − r)²) − mean(var_r)`. Everything is relative to
+//! the reference's converged mean level `norm = mean(r)` (never its maximum or a percentile, which noise
+//! inflates). The floor is the smallest relative RMSE the comparison tells from zero: with no error,
+//! each item's `(a − r)²` is squared Gaussian noise of variance `2 var_r²`, so the corrected MSE of an
+//! exact method scatters by `se0 = sqrt(mean(2 var_r²)/n)` and the floor is `sqrt(2 se0)/norm`. Below
+//! it the report reads "< floor X", never a smaller number. The 95 % interval takes each item's
+//! variance `2 var_r² + 4 d² var_r` with `d² = max((a − r)² − var_r, 0)`.
+
+use serde::{Deserialize, Serialize};
+
+/// A method's error against a noisy reference (module doc).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NoiseCorrected {
+    /// Noise-corrected relative RMSE; `None` below the floor.
+    pub rel_rmse: Option<f64>,
+    /// Smallest relative RMSE the comparison resolves.
+    pub floor: f64,
+    /// 95 % interval of the relative RMSE.
+    pub ci95: [f64; 2],
+    /// Relative RMSE before the reference's noise is removed.
+    pub raw_rel_rmse: f64,
+    /// The reference's own noise as a relative RMS, `sqrt(mean(var_r))/norm`.
+    pub reference_noise: f64,
+    /// `mean(r)`, the normalisation.
+    pub norm: f64,
+    /// Items × channels compared.
+    pub n: usize,
+}
+
+impl NoiseCorrected {
+    /// The error of `a` against `r` whose means have variances `var_r` (flattened, equal lengths).
+    ///
+    /// # Errors
+    /// Lengths differ, nothing is compared, a value is not finite, or the reference's mean is not
+    /// positive (an error relative to an empty reference judges nothing).
+    pub fn of(a: &[f64], r: &[f64], var_r: &[f64]) -> Result<Self, String> {
+        if a.len() != r.len() || r.len() != var_r.len() {
+            return Err(format!("lengths differ: method {}, reference {}, variance {}", a.len(), r.len(), var_r.len()));
+        }
+        if a.is_empty() {
+            return Err("nothing to compare".into());
+        }
+        if let Some(i) = (0..a.len()).find(|&i| !(a[i].is_finite() && r[i].is_finite() && var_r[i].is_finite())) {
+            return Err(format!(
+                "value {i} is not finite (method {}, reference {}, variance {})",
+                a[i], r[i], var_r[i]
+            ));
+        }
+        let n = a.len();
+        let mean = |f: &dyn Fn(usize) -> f64| (0..n).map(f).sum::<f64>() / n as f64;
+        let norm = mean(&|i| r[i]);
+        if norm <= 0.0 {
+            return Err(format!("the reference's mean {norm} is not positive"));
+        }
+        let raw = mean(&|i| (a[i] - r[i]).powi(2));
+        let noise = mean(&|i| var_r[i]);
+        let corrected = raw - noise;
+        let se0 = (mean(&|i| 2.0 * var_r[i] * var_r[i]) / n as f64).sqrt();
+        let floor = (2.0 * se0).sqrt() / norm;
+        let rel = corrected.max(0.0).sqrt() / norm;
+        let spread: f64 = (0..n)
+            .map(|i| {
+                let d2 = ((a[i] - r[i]).powi(2) - var_r[i]).max(0.0);
+                2.0 * var_r[i] * var_r[i] + 4.0 * d2 * var_r[i]
+            })
+            .sum();
+        let se = spread.sqrt() / n as f64;
+        let bound = |x: f64| x.max(0.0).sqrt() / norm;
+        Ok(Self {
+            rel_rmse: (rel >= floor).then_some(rel),
+            floor,
+            ci95: [bound(corrected - 1.96 * se), bound(corrected + 1.96 * se)],
+            raw_rel_rmse: raw.sqrt() / norm,
+            reference_noise: noise.sqrt() / norm,
+            norm,
+            n,
+        })
+    }
+
+    /// [`Self::of`] for RGB items.
+    ///
+    /// # Errors
+    /// As [`Self::of`].
+    pub fn of_rgb(a: &[[f64; 3]], r: &[[f64; 3]], var_r: &[[f64; 3]]) -> Result<Self, String> {
+        let flat = |x: &[[f64; 3]]| x.iter().flatten().copied().collect::<Vec<f64>>();
+        Self::of(&flat(a), &flat(r), &flat(var_r))
+    }
+
+    /// The noise-corrected relative MSE, `rel_rmse²`, or the floor's square when below it (the
+    /// smallest MSE the comparison can claim).
+    pub fn mse_or_floor(&self) -> f64 {
+        self.rel_rmse.unwrap_or(self.floor).powi(2)
+    }
+
+    /// Report wording in per cent: "12.3 % [11.9, 12.8] (floor 0.4 %)" or "< floor 0.4 %".
+    pub fn percent(&self) -> String {
+        match self.rel_rmse {
+            Some(e) => format!(
+                "{} [{}, {}] (floor {} %)",
+                pct(e) + " %",
+                pct(self.ci95[0]),
+                pct(self.ci95[1]),
+                pct(self.floor)
+            ),
+            None => format!("< floor {} %", pct(self.floor)),
+        }
+    }
+}
+
+/// A fraction in per cent with two significant figures (one decimal at least).
+fn pct(x: f64) -> String {
+    let p = 100.0 * x;
+    if p >= 10.0 {
+        format!("{p:.0}")
+    } else if p >= 0.1 {
+        format!("{p:.1}")
+    } else {
+        format!("{p:.2}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::rng::StreamKey;
+
+    /// An exact method against a noisy reference: the raw error is the noise, the corrected one is
+    /// below the floor, and the report says so instead of a smaller number.
+    #[test]
+    fn an_exact_method_reads_below_the_floor() {
+        let n = 4000;
+        let sigma = 0.1;
+        let truth: Vec<f64> = (0..n).map(|i| 1.0 + 0.5 * ((i as f64) * 0.01).sin()).collect();
+        let r: Vec<f64> = (0..n).map(|i| truth[i] + sigma * gauss(7, i as u64)).collect();
+        let e = NoiseCorrected::of(&truth, &r, &vec![sigma * sigma; n]).unwrap();
+        assert_eq!(e.rel_rmse, None, "{e:?}");
+        assert!(e.percent().starts_with("< floor "), "{}", e.percent());
+        // raw ≈ σ/mean(r); floor = sqrt(2·sqrt(2σ⁴/n))/mean(r) = σ·(8/n)^{1/4}/mean(r).
+        assert!((e.raw_rel_rmse - sigma / e.norm).abs() < 0.005, "{e:?}");
+        assert!((e.floor - sigma * (8.0 / n as f64).powf(0.25) / e.norm).abs() < 1e-12, "{e:?}");
+        assert!((e.reference_noise - sigma / e.norm).abs() < 1e-12);
+    }
+
+    /// A method 5 % off everywhere, reference noise 10 % per item: the raw error (≈ 11.2 %) would
+    /// flatter nothing but overstates; the corrected one recovers 5 % inside its interval.
+    #[test]
+    fn a_biased_method_is_recovered_under_the_noise() {
+        let n = 20_000;
+        let sigma = 0.1;
+        let a = vec![1.05; n];
+        let r: Vec<f64> = (0..n).map(|i| 1.0 + sigma * gauss(11, i as u64)).collect();
+        let e = NoiseCorrected::of(&a, &r, &vec![sigma * sigma; n]).unwrap();
+        let rel = e.rel_rmse.expect("above the floor");
+        assert!((rel - 0.05).abs() < 0.005, "{e:?}");
+        assert!(e.ci95[0] <= 0.05 && 0.05 <= e.ci95[1], "{e:?}");
+        assert!((e.raw_rel_rmse - (0.05f64.powi(2) + 0.01).sqrt()).abs() < 0.003, "{e:?}");
+        assert!(e.percent().starts_with("5.0 % ["), "{}", e.percent());
+    }
+
+    /// Normalised by the mean, not by a bright outlier: one pixel 100× brighter changes the norm by
+    /// its share of the mean only.
+    #[test]
+    fn the_norm_is_the_mean() {
+        let mut r = vec![1.0; 99];
+        r.push(100.0);
+        let a: Vec<f64> = r.iter().map(|x| x * 1.1).collect();
+        let e = NoiseCorrected::of(&a, &r, &vec![0.0; 100]).unwrap();
+        assert!((e.norm - 1.99).abs() < 1e-12);
+        // Σ(0.1 r)²/n = (99·0.01 + 100)/100; relative to the mean 1.99.
+        let want = ((99.0 * 0.01 + 100.0) / 100.0f64).sqrt() / 1.99;
+        assert!((e.rel_rmse.unwrap() - want).abs() < 1e-12);
+        assert_eq!(e.floor, 0.0);
+    }
+
+    #[test]
+    fn bad_input_is_refused() {
+        assert!(NoiseCorrected::of(&[1.0], &[1.0, 2.0], &[0.0, 0.0]).unwrap_err().contains("lengths differ"));
+        assert!(NoiseCorrected::of(&[], &[], &[]).is_err());
+        assert!(NoiseCorrected::of(&[1.0], &[0.0], &[0.0]).unwrap_err().contains("not positive"));
+        assert!(NoiseCorrected::of(&[f64::NAN], &[1.0], &[0.0]).unwrap_err().contains("not finite"));
+    }
+
+    /// A standard normal draw from the counter-based stream `(key, i)` (Box–Muller).
+    fn gauss(key: u64, i: u64) -> f64 {
+        let s = StreamKey { table: key, cell: i };
+        let (u1, u2) = (s.uniform(0, 0).max(1e-300), s.uniform(0, 1));
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+}
