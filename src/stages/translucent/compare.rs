@@ -4,23 +4,26 @@
 //! **Input → output.** A point-based [`Frame`] and a [`ReferenceImage`] of the same view (with their
 //! run times) → a [`Comparison`]; a quality ladder of both methods → [`Curve`]s of (ms, MSE).
 //!
-//! **Image normalisation.** Both images are divided by `s`, the 99th percentile (nearest rank) of the
-//! reference's object-pixel channel values, so the object's bright end sits near 1 as in a displayed
-//! image (wang2018 reports MSE of displayed pictures without stating the scale). The MSE is the mean of
-//! `(x − r)²/s²` over the object's pixels (where the primary ray hits the object first) and the three
-//! channels.
+//! **Image normalisation.** Both images are divided by `s`, the mean of the reference's object-pixel
+//! channel values: a converged statistic of the reference (its noise averages out over the object),
+//! unlike its maximum or a percentile, which noise inflates and which would make every error look
+//! smaller (issue 30). wang2018 reports MSE of displayed pictures without stating the scale. The MSE is
+//! the mean of `(x − r)²/s²` over the object's pixels (where the primary ray hits the object first) and
+//! the three channels.
 //!
 //! **Reference noise.** The reference's MSE against the truth at `n` paths per pixel is its mean
 //! per-pixel variance of the mean, `v/n`; it is subtracted from the measured MSE (`mse_corrected`, the
-//! expected MSE against the noise-free image) and gives the reference's MSE-vs-time line: at equal MSE
-//! `e` the reference needs `n_e = v₁/e` paths per pixel (`v₁` = per-path variance), i.e.
-//! `reference_ms · n_e / n`. When the point-based error is below the reference's own noise the speed-up
-//! is reported as a lower bound (`n_e` from the noise itself).
+//! expected MSE against the noise-free image). [`NoiseCorrected`] states the same error as a relative
+//! RMSE with its floor (the smallest error the comparison tells from zero) and 95 % interval; below the
+//! floor the report reads "< floor X". The reference's MSE-vs-time line: at equal MSE `e` the reference
+//! needs `n_e = v₁/e` paths per pixel (`v₁` = per-path variance), i.e. `reference_ms · n_e / n`. When
+//! the point-based error is below the floor the speed-up is a lower bound (`e` = the floor's square).
 
 use serde::{Deserialize, Serialize};
 
 use super::render::Frame;
 use crate::reference::translucent::ReferenceImage;
+use crate::report::noisy::NoiseCorrected;
 
 /// The point-based frame against the reference.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -39,6 +42,9 @@ pub struct Comparison {
     pub reference_noise: f64,
     /// `max(mse − reference_noise, 0)`.
     pub mse_corrected: f64,
+    /// The same error as a noise-corrected relative RMSE with its floor and interval (`None` when the
+    /// reference is black on the object).
+    pub error: Option<NoiseCorrected>,
     /// Per component against the reference's paths with the same number of medium events: single vs
     /// one, double vs two, multiple + bounced vs three or more, rest vs none (normalised MSE, noise not
     /// removed).
@@ -51,25 +57,22 @@ pub struct Comparison {
     pub equal_mse_reference_ms: f64,
     /// `equal_mse_reference_ms / point_ms`.
     pub speedup: f64,
-    /// The point-based error is below a tenth of the reference's noise: the speed-up is a lower bound.
+    /// The point-based error is below the floor: the speed-up is a lower bound.
     pub lower_bound: bool,
 }
 
-/// The normalisation `s` of the module doc (1 when the object is black or absent).
+/// The normalisation `s` of the module doc: the mean of the reference's finite object-pixel channel
+/// values (1 when the object is black or absent).
 pub fn scale_of(reference: &ReferenceImage) -> f64 {
-    let total = reference.total();
-    let mut v: Vec<f64> = total
+    let (sum, n) = reference
+        .total()
         .iter()
         .zip(&reference.object)
         .filter(|(_, o)| **o)
         .flat_map(|(p, _)| p.iter().copied())
         .filter(|x| x.is_finite())
-        .collect();
-    if v.is_empty() {
-        return 1.0;
-    }
-    v.sort_by(f64::total_cmp);
-    let s = v[((0.99 * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1];
+        .fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    let s = if n > 0 { sum / n as f64 } else { 0.0 };
     if s > 0.0 { s } else { 1.0 }
 }
 
@@ -117,13 +120,18 @@ pub fn compare(frame: &Frame, point_ms: f64, reference: &ReferenceImage, referen
         mse(&frame.rest, &c[0], mask, scale),
     ];
     let samples = (reference.paths / (reference.width * reference.height).max(1) as u64).max(1) as u32;
-    // Per-path variance v₁ = noise · n; paths needed for MSE e: v₁/e.
+    let pick =
+        |img: &[[f64; 3]]| -> Vec<[f64; 3]> { img.iter().zip(mask).filter(|(_, m)| **m).map(|(p, _)| *p).collect() };
+    let error =
+        NoiseCorrected::of_rgb(&pick(&frame.total()), &pick(&reference.total()), &pick(&reference.variance)).ok();
+    // Per-path variance v₁ = noise · n; paths needed for MSE e: v₁/e, with e no smaller than the floor's
+    // square (below it only a lower bound is claimed).
     let per_path = ref_noise * samples as f64;
-    // `measured − noise` estimates the true MSE without bias; with ≥ 1000 pixel channels the noise
-    // itself is known to a few per cent, so the estimate is used down to a tenth of the noise and below
-    // that only a lower bound is claimed.
-    let lower_bound = corrected <= 0.1 * ref_noise;
-    let target = if lower_bound { 0.1 * ref_noise } else { corrected };
+    let lower_bound = error.is_none_or(|e| e.rel_rmse.is_none());
+    let target = match error {
+        Some(e) if lower_bound => e.floor * e.floor,
+        _ => corrected,
+    };
     let n_eq = if target > 0.0 { per_path / target } else { samples as f64 };
     let equal_ms = reference_ms * n_eq / samples as f64;
     Comparison {
@@ -134,6 +142,7 @@ pub fn compare(frame: &Frame, point_ms: f64, reference: &ReferenceImage, referen
         mse: measured,
         reference_noise: ref_noise,
         mse_corrected: corrected,
+        error,
         mse_components,
         point_ms,
         reference_ms,
@@ -143,13 +152,33 @@ pub fn compare(frame: &Frame, point_ms: f64, reference: &ReferenceImage, referen
     }
 }
 
+impl Comparison {
+    /// Report wording: the relative RMSE with its interval and floor (or "< floor X"), the reference's
+    /// noise, and the speed-up at equal MSE ("≥" when the error is below the floor).
+    pub fn describe(&self) -> String {
+        let err = self.error.map_or_else(|| "the reference is black on the object".into(), |e| e.percent());
+        format!(
+            "relative RMSE {err}, reference noise {:.1} % ({} paths/px), {}{}× faster at equal MSE",
+            100.0 * self.reference_noise.sqrt(),
+            self.samples,
+            if self.lower_bound { "≥ " } else { "" },
+            match self.speedup {
+                x if x >= 10.0 => format!("{x:.0}"),
+                x if x >= 1.0 => format!("{x:.1}"),
+                x => format!("{x:.2}"),
+            }
+        )
+    }
+}
+
 /// One method's error against run time.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Curve {
     /// Method and material.
     pub name: String,
-    /// (setting, ms, normalised MSE against the converged reference with its noise removed).
-    pub points: Vec<(String, f64, f64)>,
+    /// (setting, ms, normalised MSE against the converged reference with its noise removed, below the
+    /// floor: then the MSE is the floor's square, an upper bound).
+    pub points: Vec<(String, f64, f64, bool)>,
 }
 
 #[cfg(test)]
@@ -170,16 +199,20 @@ mod tests {
         }
     }
 
+    /// The normalisation is the reference's mean over the object, not its bright end: a percentile
+    /// of a noisy reference is inflated by the noise and made errors look up to 2.7× smaller (issue 30).
     #[test]
-    fn scale_is_the_99th_percentile_of_object_values() {
+    fn scale_is_the_mean_of_object_values() {
         // 100 object pixels with values 1..=100 in every channel, one bright non-object pixel.
         let mut vals: Vec<[f64; 3]> = (1..=100).map(|i| [i as f64; 3]).collect();
         vals.push([1e6; 3]);
         let mut obj = vec![true; 100];
         obj.push(false);
         let r = reference(vals, vec![[0.0; 3]; 101], obj, 16);
-        // 300 values; nearest rank ⌈0.99·300⌉ = 297 → value 99.
-        assert_eq!(scale_of(&r), 99.0);
+        assert_eq!(scale_of(&r), 50.5);
+        // A black object keeps the unit scale.
+        let r = reference(vec![[0.0; 3]; 4], vec![[0.0; 3]; 4], vec![true; 4], 16);
+        assert_eq!(scale_of(&r), 1.0);
     }
 
     #[test]
@@ -200,18 +233,24 @@ mod tests {
             stats: Default::default(),
         };
         let c = compare(&frame, 10.0, &r, 1000.0);
-        // s = 2: MSE = (0.2/2)² = 0.01; noise = 0.04/4 = 0.01 → corrected 0 → lower bound at a tenth
-        // of the noise.
+        // s = 2: MSE = (0.2/2)² = 0.01; noise = 0.04/4 = 0.01 → corrected 0 → below the floor.
         assert!((c.mse - 0.01).abs() < 1e-12);
         assert!((c.reference_noise - 0.01).abs() < 1e-12);
         assert!(c.lower_bound);
-        // At MSE 0.001 the reference needs 10 × its 16 paths: 10 000 ms against 10 ms → 1000×.
-        assert!((c.speedup - 1000.0).abs() < 1e-6);
+        // Floor over 30 channel values of variance 0.04: se0 = sqrt(2·0.04²/30), floor = sqrt(2 se0)/2;
+        // the reference reaches MSE floor² with 16 · 0.01/floor² paths, the speed-up is its time / 10 ms.
+        let e = c.error.unwrap();
+        let se0 = (2.0 * 0.04f64.powi(2) / 30.0).sqrt();
+        let floor = (2.0 * se0).sqrt() / 2.0;
+        assert!(e.rel_rmse.is_none() && (e.floor - floor).abs() < 1e-12, "{e:?}");
+        assert!((c.speedup - 1000.0 * 0.01 / (floor * floor) / 10.0).abs() < 1e-6, "{}", c.speedup);
         assert!((c.mse_components[0] - 0.01).abs() < 1e-12);
-        // A frame off by 0.4 (MSE 0.04, corrected 0.03): the reference needs 16 · 0.01/0.03 paths.
+        // A frame off by 0.4 (MSE 0.04, corrected 0.03 = relative RMSE √0.03 ≈ 17 %, above the floor of
+        // ≈ 7.2 %): the reference needs 16 · 0.01/0.03 paths.
         let far = Frame { single: vec![[2.4; 3]; n], ..frame };
         let c = compare(&far, 10.0, &r, 1000.0);
         assert!(!c.lower_bound && (c.mse_corrected - 0.03).abs() < 1e-12);
+        assert!((c.error.unwrap().rel_rmse.unwrap() - 0.03f64.sqrt()).abs() < 1e-12);
         assert!((c.speedup - 1000.0 / 3.0 / 10.0).abs() < 1e-9);
     }
 }

@@ -18,8 +18,9 @@
 //!
 //! **Check** (with `reference_samples > 0`): at `reference_width` pixels wide, the point-based frame and
 //! the path-traced reference ([`reference::render`]) of the same view; `summary.json` holds the MSE over
-//! the object's pixels (both images divided by the reference's 99th-percentile object value, see
-//! [`compare`]), with the reference's own noise removed, per component as well, and both run times.
+//! the object's pixels (both images divided by the reference's mean object value, see [`compare`]),
+//! with the reference's own noise removed and its floor stated, per component as well, and both run
+//! times.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -28,6 +29,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::reference::translucent::{self as reference, ReferenceOptions};
 use crate::render::{Image, RgbImage, ViewCamera};
+use crate::report::noisy::NoiseCorrected;
 use crate::report::plot::{Plot, Scale, Series, write_png};
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
@@ -398,10 +400,7 @@ impl TranslucentRender {
             .map(|m| {
                 let mut s = format!("{} {:.1} s", m.material, m.times_ms[5] / 1e3);
                 if let Some(c) = &m.comparison {
-                    s.push_str(&format!(
-                        " (MSE {:.1e} vs path tracing, {:.0}× faster at equal MSE)",
-                        c.mse_corrected, c.speedup
-                    ));
+                    s.push_str(&format!(" (vs path tracing: {})", c.describe()));
                 }
                 s
             })
@@ -647,7 +646,7 @@ impl TranslucentRender {
             Quality { surface_samples: 65536, k_max: 16, epsilon1: 0.05 },
         ];
         let mut md = format!(
-            "## {id}: translucent media (wang2018), {w}×{h}\n\nNormalised MSE over the object's pixels (both images divided by the reference's 99th-percentile object value) against a {converged}-path reference, with that reference's own noise removed, against run time. Point-based times include the pre-processing.\n\n| material | method | setting | ms | MSE |\n|---|---|---|---:|---:|\n"
+            "## {id}: translucent media (wang2018), {w}×{h}\n\nNormalised MSE over the object's pixels (both images divided by the reference's mean object value) against a {converged}-path reference, with that reference's own noise removed, against run time; \"< X\" where the error is below the smallest MSE that reference resolves. Point-based times include the pre-processing.\n\n| material | method | setting | ms | MSE |\n|---|---|---|---:|---:|\n"
         );
         for name in &self.materials {
             let material = loaded.material(id, name, self.mfp_scale)?;
@@ -660,20 +659,16 @@ impl TranslucentRender {
                 &ReferenceOptions { samples: converged, seed: 0x7e57, ..ReferenceOptions::default() },
                 &|_| {},
             );
-            let scale = compare::scale_of(&truth);
-            let truth_noise = compare::noise(&truth, &truth.object, scale);
-            let err = |img: &[[f64; 3]]| -> f64 {
-                let mut sum = 0.0;
-                let mut n = 0usize;
-                for ((x, y), m) in img.iter().zip(truth.total()).zip(&truth.object) {
-                    if *m {
-                        for c in 0..3 {
-                            sum += ((x[c] - y[c]) / scale).powi(2);
-                        }
-                        n += 3;
-                    }
-                }
-                (sum / n.max(1) as f64 - truth_noise).max(0.0)
+            let pick = |img: &[[f64; 3]]| -> Vec<[f64; 3]> {
+                img.iter().zip(&truth.object).filter(|(_, m)| **m).map(|(p, _)| *p).collect()
+            };
+            let (truth_total, truth_var) = (pick(&truth.total()), pick(&truth.variance));
+            // Normalised MSE with the reference's noise removed, the floor's square when below it, and
+            // whether it is.
+            let err = |img: &[[f64; 3]]| -> Result<(f64, bool), StageError> {
+                let e = NoiseCorrected::of_rgb(&pick(img), &truth_total, &truth_var)
+                    .map_err(|e| fail(format!("the {converged}-path reference cannot judge: {e}")))?;
+                Ok((e.mse_or_floor(), e.rel_rmse.is_none()))
             };
             let mut curves = Vec::new();
             let mut pts = Vec::new();
@@ -689,7 +684,8 @@ impl TranslucentRender {
                 let (frame, _) = stage.render_frame(&setup, table, &small, false).map_err(fail)?;
                 let t = ms(t0);
                 let label = format!("{} samples, k {}, ε1 {}", q.surface_samples, q.k_max, q.epsilon1);
-                pts.push((label, t, err(&frame.total())));
+                let (e, below) = err(&frame.total())?;
+                pts.push((label, t, e, below));
             }
             curves.push(compare::Curve { name: format!("{name} point-based"), points: pts });
             let mut pts = Vec::new();
@@ -701,7 +697,8 @@ impl TranslucentRender {
                     &ReferenceOptions { samples: spp, seed: 0x51 + spp as u64, ..ReferenceOptions::default() },
                     &|_| {},
                 );
-                pts.push((format!("{spp} paths/px"), ms(t0), err(&r.total())));
+                let (e, below) = err(&r.total())?;
+                pts.push((format!("{spp} paths/px"), ms(t0), e, below));
             }
             curves.push(compare::Curve { name: format!("{name} path tracing"), points: pts });
             let series: Vec<Series> = curves
@@ -724,8 +721,9 @@ impl TranslucentRender {
             };
             write_png(&png, &plot).map_err(|e| out(&png, e.to_string()))?;
             for c in &curves {
-                for (label, t, e) in &c.points {
-                    md.push_str(&format!("| {name} | {} | {label} | {t:.0} | {e:.2e} |\n", c.name));
+                for (label, t, e, below) in &c.points {
+                    let lt = if *below { "< " } else { "" };
+                    md.push_str(&format!("| {name} | {} | {label} | {t:.0} | {lt}{e:.2e} |\n", c.name));
                 }
             }
         }
@@ -800,14 +798,7 @@ impl TranslucentRender {
                     baseline_ms: c.equal_mse_reference_ms,
                     candidate_ms: c.point_ms,
                     speedup: c.speedup,
-                    note: format!(
-                        "{}×{}, MSE {:.2e}, reference noise {:.2e}{}",
-                        c.size[0],
-                        c.size[1],
-                        c.mse_corrected,
-                        c.reference_noise,
-                        if c.lower_bound { ", lower bound" } else { "" }
-                    ),
+                    note: format!("{}×{}, {}", c.size[0], c.size[1], c.describe()),
                 });
             }
         }
