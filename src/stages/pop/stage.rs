@@ -34,6 +34,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::render::{Image, RgbImage, ViewCamera};
+use crate::report::noisy::NoiseCorrected;
 use crate::scene::bvh::SceneBvh;
 use crate::scene::{EnvironmentLight, Scene};
 use crate::stages::pop::environment::{self, EnvMap, EnvOrdinate, OrdinateSet};
@@ -186,10 +187,8 @@ pub struct Fig12Row {
     pub g: f64,
     /// Mid-slice errors, iterations and times.
     pub slice: crate::stages::pop::fig12::SliceComparison,
-    /// Relative RMSE of POP's cube image against path tracing, noise removed.
-    pub image_error: f64,
-    /// The path-traced image's noise (relative RMSE).
-    pub image_noise: f64,
+    /// POP's cube image against path tracing, noise removed, with its floor.
+    pub image: NoiseCorrected,
     /// POP (propagation + ray march) and path-tracing times for the image \[ms\].
     pub image_ms: [f64; 2],
 }
@@ -230,13 +229,9 @@ pub struct ReferenceComparison {
     pub size: [usize; 2],
     /// Paths per pixel of the reference.
     pub samples: u32,
-    /// Relative RMS error of POP's scattered light, `sqrt(Σ(pop − ref)²/Σ ref²)` over pixels and channels.
-    pub error: f64,
-    /// The reference's own noise in the same units, `sqrt(Σ stderr²/Σ ref²)`: part of `error`.
-    pub reference_noise: f64,
-    /// `error` with the noise removed, `sqrt(error² − noise²)`: the expected error against a noise-free
-    /// reference.
-    pub error_corrected: f64,
+    /// POP's scattered light against it over the pixels and channels compared, relative to the
+    /// reference's mean, its noise removed, with its floor, interval, the raw error and the noise.
+    pub error: NoiseCorrected,
     /// Ratio of POP's summed scattered light to the reference's (energy bias).
     pub total_ratio: f64,
     /// POP frame (all phases) and path-tracing times \[ms\].
@@ -858,19 +853,22 @@ impl PopRender {
         );
         if let Some(r) = &summary.reference {
             line.push_str(&format!(
-                "; vs path tracing at {}×{}: scattered light {:.1} % off (noise-corrected), total ×{:.3}",
+                "; vs path tracing at {}×{} ({} paths/px, noise {:.1} %): scattered light {} off, total ×{:.3}",
                 r.size[0],
                 r.size[1],
-                100.0 * r.error_corrected,
+                r.samples,
+                100.0 * r.error.reference_noise,
+                r.error.percent(),
                 r.total_ratio
             ));
         }
         for r in &summary.fig12 {
             line.push_str(&format!(
-                "; Fig. 12 g {}: collided fluence {:.0} %, image {:.0} % off",
+                "; Fig. 12 g {}: collided fluence {} (light tracer's noise {:.1} %), image {} off",
                 r.g,
-                100.0 * r.slice.collided_error,
-                100.0 * r.image_error
+                r.slice.collided.percent(),
+                100.0 * r.slice.collided.reference_noise,
+                r.image.percent()
             ));
         }
         Ok(StageOutcome { outputs, summary: format!("{line} → {}", dir.display()) })
@@ -905,7 +903,14 @@ impl PopRender {
             render_frame(media, &v.bvh, table, cam, &distance, self.range_sigma, &crate::render::gpu::Device::Cpu)
                 .map_err(fail)?;
         let pop_ms = ms(t0);
-        let c = compare_with_reference(&v.scene, media, cam, &frame.scattered, self.reference_samples);
+        let c =
+            compare_with_reference(&v.scene, media, cam, &frame.scattered, self.reference_samples).map_err(|e| {
+                StageError::Input {
+                    stage: id.into(),
+                    message: format!("the path-traced reference cannot judge POP: {e}"),
+                    help: "aim the camera at the lit medium, or set reference_samples: 0 to skip the check".into(),
+                }
+            })?;
         for (name, img) in [("reference_scattered.png", &c.1), ("reference_pop.png", &frame.scattered)] {
             let png = dir.join(name);
             crate::image_io::write_png_preview(&png, w, h, &img.data, None).map_err(|e| StageError::Output {
@@ -921,7 +926,7 @@ impl PopRender {
 
 /// Path-traces `scene`'s scattered light as POP sees it ([`pop_scene::scattering_reference_scene`]) from
 /// `cam` with `samples` paths per pixel and compares `pop` with it; returns the comparison (POP time 0)
-/// and the reference image. The environment's part (when the stage has one) comes from
+/// and the reference image, or why the reference cannot judge (it is black where compared). The environment's part (when the stage has one) comes from
 /// [`crate::reference::grid_mc::render_environment`] on POP's voxel medium with the scene's surfaces as
 /// black occluders, and is added to the lights' part (the scattered light is linear in the sources;
 /// the two estimates are independent, so their variances add).
@@ -931,7 +936,7 @@ pub fn compare_with_reference(
     cam: &ViewCamera,
     pop: &RgbImage,
     samples: u32,
-) -> (ReferenceComparison, RgbImage) {
+) -> Result<(ReferenceComparison, RgbImage), String> {
     let t0 = Instant::now();
     let n = cam.width * cam.height;
     let mut mean = vec![[0.0f64; 3]; n];
@@ -984,23 +989,21 @@ pub fn compare_with_reference(
         data: pop.data.iter().zip(&masked).map(|(v, &m)| if m { [0.0; 3] } else { *v }).collect(),
     };
     let pop = &pop_kept;
-    let variance_sum: f64 =
-        variance.iter().zip(&masked).filter(|(_, m)| !**m).map(|(v, _)| v.iter().sum::<f64>()).sum();
-    let error = crate::render::rel_rmse(pop, &img);
+    let compared = |img: &[[f64; 3]]| -> Vec<[f64; 3]> {
+        img.iter().zip(&masked).filter(|(_, m)| !**m).map(|(p, _)| *p).collect()
+    };
+    let pop_f64: Vec<[f64; 3]> = pop.data.iter().map(|p| p.map(f64::from)).collect();
+    let error = NoiseCorrected::of_rgb(&compared(&pop_f64), &compared(&mean), &compared(&variance))?;
     let sum = |i: &RgbImage| i.data.iter().map(|c| c.iter().map(|&v| f64::from(v)).sum::<f64>()).sum::<f64>();
     let r = sum(&img);
-    let sq: f64 = mean.iter().zip(&masked).map(|(c, &m)| keep(*c, m).iter().map(|v| v * v).sum::<f64>()).sum();
-    let noise = if sq > 0.0 { (variance_sum / sq).sqrt() } else { 0.0 };
     let c = ReferenceComparison {
         size: [cam.width, cam.height],
         samples,
         error,
-        reference_noise: noise,
-        error_corrected: (error * error - noise * noise).max(0.0).sqrt(),
         total_ratio: if r > 0.0 { sum(pop) / r } else { 0.0 },
         ms: [0.0, ref_ms],
     };
-    (c, img)
+    Ok((c, img))
 }
 
 /// The Fig. 12 settings of a preset on an `n³` cube grid (Eq. 10's switch with the cube's `σ_s`).
@@ -1090,13 +1093,7 @@ impl PopRender {
                     .map_err(|e| out(&png, e.to_string()))?;
                 outputs.push(png);
             }
-            rows.push(Fig12Row {
-                g,
-                slice,
-                image_error: img.error,
-                image_noise: img.reference_noise,
-                image_ms: [img.pop_ms, img.reference_ms],
-            });
+            rows.push(Fig12Row { g, slice, image: img.error, image_ms: [img.pop_ms, img.reference_ms] });
         }
         Ok(rows)
     }
@@ -1115,8 +1112,11 @@ pub struct LadderPoint {
     pub propagation_ms: f64,
     /// Iterations run (anisotropic + isotropic).
     pub iterations_run: usize,
-    /// Relative RMSE of the composed image against the path-traced one, noise removed.
+    /// The collided fluence of the mid slice against the light tracer (relative to its mean, noise
+    /// removed), or the floor when below it.
     pub error: f64,
+    /// `error` is the floor (an upper bound).
+    pub below_floor: bool,
 }
 
 impl PopRender {
@@ -1134,6 +1134,7 @@ impl PopRender {
         let g = 0.7;
         let photons = u64::from(self.fig12_photons).max(400_000);
         let mut points = Vec::new();
+        let mut floors = Vec::new();
         for grid in [8usize, 16, 32] {
             let reference = fig12::reference_fluence(g, grid, photons, 99);
             for iterations in [4usize, 8, 16, 32, 64, 128] {
@@ -1142,13 +1143,16 @@ impl PopRender {
                     settings.iterations = iterations;
                     settings.residuum = residuum;
                     let r = fig12::pop_fluence(g, grid, &flow, &settings).map_err(fail)?;
+                    let e = fig12::slice_error(&r, &reference, grid).map_err(fail)?;
+                    floors.push((grid, e.floor));
                     points.push(LadderPoint {
                         grid,
                         iterations,
                         residuum,
                         propagation_ms: r.ms,
                         iterations_run: r.iterations,
-                        error: fig12::slice_error(&r.collided, &reference.collided, grid),
+                        error: e.mse_or_floor().sqrt(),
+                        below_floor: e.rel_rmse.is_none(),
                     });
                 }
             }
@@ -1158,7 +1162,8 @@ impl PopRender {
         let mut mc_points = Vec::new();
         for n in [1_000u64, 4_000, 16_000, 64_000] {
             let r = fig12::reference_fluence(g, 16, n, 7);
-            mc_points.push((r.ms, fig12::slice_error(&r.collided, &reference.collided, 16)));
+            let e = fig12::slice_error(&r, &reference, 16).map_err(fail)?;
+            mc_points.push((r.ms, e.mse_or_floor().sqrt(), e.rel_rmse.is_none()));
         }
         std::fs::create_dir_all(report_dir).map_err(|e| out(report_dir, e.to_string()))?;
         let mut series = Vec::new();
@@ -1175,13 +1180,13 @@ impl PopRender {
         }
         series.push(crate::report::plot::Series {
             name: "light tracing".into(),
-            points: mc_points.iter().map(|&(t, e)| (t.max(1e-3), e.max(1e-6))).collect(),
+            points: mc_points.iter().map(|&(t, e, _)| (t.max(1e-3), e.max(1e-6))).collect(),
         });
         let png = report_dir.join(format!("{id}-pop-error-vs-time.png"));
         let plot = crate::report::plot::Plot {
             title: &format!("{id}: POP on the elek2014 Fig. 12 cube (g = {g}), error against time"),
             x_label: "run time [ms]",
-            y_label: "rel. RMS error of the collided fluence, mid slice",
+            y_label: "collided fluence, mid slice: rel. RMSE (noise removed)",
             x_scale: crate::report::plot::Scale::Log10,
             y_scale: crate::report::plot::Scale::Log10,
             series: &series,
@@ -1189,23 +1194,28 @@ impl PopRender {
             height: 720,
         };
         crate::report::plot::write_png(&png, &plot).map_err(|e| out(&png, e.to_string()))?;
+        floors.dedup();
+        let floors: Vec<String> = floors.iter().map(|(n, f)| format!("{n}³: {:.2} %", 100.0 * f)).collect();
         let mut md = format!(
-            "## {id}: Principal-Ordinates Propagation (elek2014) on the Fig. 12 cube, g = {g}\n\nRelative RMS error of the collided fluence in the middle slice against light tracing ({photons} photons per grid), against run time, per grid and iteration cap, with and without the isotropic residuum.\n\n| grid | M | residuum | iterations run | ms | rel. error |\n|---:|---:|---|---:|---:|---:|\n"
+            "## {id}: Principal-Ordinates Propagation (elek2014) on the Fig. 12 cube, g = {g}\n\nRelative RMSE of the collided fluence in the middle slice against light tracing ({photons} photons per grid), relative to the tracer's mean with its noise removed (\"< X\": below the floor X it resolves; floors {}), against run time, per grid and iteration cap, with and without the isotropic residuum.\n\n| grid | M | residuum | iterations run | ms | rel. error |\n|---:|---:|---|---:|---:|---:|\n",
+            floors.join(", ")
         );
+        let lt = |below: bool| if below { "< " } else { "" };
         for p in &points {
             md.push_str(&format!(
-                "| {}³ | {} | {} | {} | {:.2} | {:.4} |\n",
+                "| {}³ | {} | {} | {} | {:.2} | {}{:.4} |\n",
                 p.grid,
                 p.iterations,
                 if p.residuum { "on" } else { "off" },
                 p.iterations_run,
                 p.propagation_ms,
+                lt(p.below_floor),
                 p.error
             ));
         }
         md.push_str("\nLight tracing against the reference (16³ tally):\n\n| ms | rel. error |\n|---:|---:|\n");
-        for (t, e) in &mc_points {
-            md.push_str(&format!("| {t:.1} | {e:.4} |\n"));
+        for (t, e, below) in &mc_points {
+            md.push_str(&format!("| {t:.1} | {}{e:.4} |\n", lt(*below)));
         }
         let md_path = report_dir.join(format!("{id}-pop.md"));
         crate::cache::write_atomic(&md_path, md.as_bytes()).map_err(|e| out(&md_path, e.to_string()))?;
