@@ -238,9 +238,8 @@ pub fn path_trace_pixels_with(
 }
 
 /// Path-traced image of `cam` ([`volpath::radiance`], surfaces bounce, `samples` paths per pixel, at
-/// most `depth` vertices) with or without media, its mean relative standard error (luminance), and its
-/// noise as a relative RMSE (`sqrt(Σ stderr²) / sqrt(Σ L²)` over pixels and channels). The two
-/// settings of `media` use independent random streams.
+/// most `depth` vertices) with or without media, and the variance of each pixel's mean (non-finite
+/// estimates read 0). The two settings of `media` use independent random streams.
 ///
 /// [`volpath::radiance`]: crate::reference::volpath::radiance
 pub fn path_trace(
@@ -250,21 +249,13 @@ pub fn path_trace(
     samples: u32,
     depth: u32,
     media: bool,
-) -> (RgbImage, f64, f64) {
+) -> (RgbImage, Vec<[f64; 3]>) {
     let est = path_trace_pixels(scene, bvh, cam, samples, depth, media);
-    let lum = crate::render::color::luminance;
-    let (mut se, mut m, mut var, mut sq) = (0.0, 0.0, 0.0, 0.0);
-    for e in &est {
-        se += lum(e.1);
-        m += lum(e.0);
-        var += e.1.iter().map(|x| x * x).sum::<f64>();
-        sq += e.0.iter().map(|x| x * x).sum::<f64>();
-    }
+    let finite = |v: [f64; 3]| v.map(|c| if c.is_finite() { c } else { 0.0 });
     let img = crate::render::Image {
         width: cam.width,
         height: cam.height,
-        data: est.iter().map(|e| e.0.map(|c| if c.is_finite() { c as f32 } else { 0.0 })).collect(),
+        data: est.iter().map(|e| finite(e.0).map(|c| c as f32)).collect(),
     };
-    let noise = if sq > 0.0 { (var / sq).sqrt() } else { 0.0 };
-    (img, if m > 0.0 { se / m } else { 0.0 }, noise)
+    (img, est.iter().map(|e| finite(e.1.map(|s| s * s))).collect())
 }

@@ -15,8 +15,10 @@
 //! full-frame time extrapolated per pixel. With `reference_samples > 0`, the physics: at
 //! `reference_width` pixels wide, a vacuum image and a fogged image are both path traced
 //! ([`volpath::radiance`](crate::reference::volpath::radiance): multiple scattering, surfaces with the same `reference_depth`), the effect is
-//! applied to the vacuum image, and the relative RMSE of the attenuation-only fog and of the full effect
-//! against the path-traced fog is reported — how much closer multiple scattering gets.
+//! applied to the vacuum image, and the errors of the attenuation-only fog, of the full effect and of
+//! no fog at all against the path-traced fog are reported — how much closer multiple scattering gets —
+//! relative to the path-traced image's mean with its noise removed and its floor stated
+//! ([`NoiseCorrected`]).
 
 use std::path::Path;
 use std::time::Instant;
@@ -25,6 +27,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::render::Image;
 use crate::render::gbuffer::GBuffer;
+use crate::report::noisy::NoiseCorrected;
 use crate::report::plot::{Plot, Scale, Series, write_png};
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
@@ -99,22 +102,12 @@ pub struct PhysicsCheck {
     pub samples: u32,
     /// Path-tracing time (vacuum + fog) \[ms\].
     pub ms: f64,
-    /// Mean relative standard error of the path-traced fog image.
-    pub reference_rel_stderr: f64,
-    /// Relative RMSE of attenuation-only fog against it.
-    pub attenuation_only_rel_rmse: f64,
-    /// Relative RMSE of the full effect against it.
-    pub effect_rel_rmse: f64,
-    /// Relative RMSE of the vacuum image (no fog at all) against it.
-    pub no_fog_rel_rmse: f64,
-    /// The path-traced image's own noise in the same units, `sqrt(Σ stderr²) / sqrt(Σ L²)`: part of
-    /// every error above. The `*_corrected` fields remove it (`sqrt(e² − noise²)`, the expected error
-    /// against the noise-free image).
-    pub reference_noise: f64,
-    /// Attenuation-only error with the reference's noise removed.
-    pub attenuation_only_corrected: f64,
-    /// Full-effect error with the reference's noise removed.
-    pub effect_corrected: f64,
+    /// Attenuation-only fog against the path-traced fog (each error holds the reference's noise).
+    pub attenuation_only: NoiseCorrected,
+    /// The full effect against it.
+    pub effect: NoiseCorrected,
+    /// The vacuum image (no fog at all) against it.
+    pub no_fog: NoiseCorrected,
 }
 
 /// What `summary.json` holds.
@@ -281,11 +274,13 @@ impl ImageFogStage {
         }
         if let Some(c) = &summary.physics {
             line.push_str(&format!(
-                "; vs path tracing at {}×{} (noise-corrected): attenuation only {:.1} %, with scattering {:.1} %",
+                "; vs path tracing at {}×{} ({} paths/px, noise {:.1} %): attenuation only {}, with scattering {}",
                 c.size[0],
                 c.size[1],
-                100.0 * c.attenuation_only_corrected,
-                100.0 * c.effect_corrected
+                c.samples,
+                100.0 * c.effect.reference_noise,
+                c.attenuation_only.percent(),
+                c.effect.percent()
             ));
         }
         Ok(StageOutcome { outputs, summary: format!("{line} → {}", dir.display()) })
@@ -519,24 +514,26 @@ impl ImageFogStage {
         let t0 = Instant::now();
         let trace = |media| view::path_trace(scene, bvh, &cam, self.reference_samples, self.reference_depth, media);
         let vacuum = trace(false).0;
-        let (fog, rel_stderr, noise) = trace(true);
+        let (fog, variance) = trace(true);
         let pt_ms = ms(t0);
         let distance = crate::render::gbuffer::distance_image(bvh, &cam);
         let out = image_fog::render(&cam, &vacuum, &distance, medium, &self.options());
-        let att = crate::render::rel_rmse(&out.attenuated, &fog);
-        let eff = crate::render::rel_rmse(&out.image, &fog);
-        let corrected = |e: f64| (e * e - noise * noise).max(0.0).sqrt();
+        let truth: Vec<[f64; 3]> = fog.data.iter().map(|p| p.map(f64::from)).collect();
+        let judge = |img: &crate::render::RgbImage| {
+            let a: Vec<[f64; 3]> = img.data.iter().map(|p| p.map(f64::from)).collect();
+            NoiseCorrected::of_rgb(&a, &truth, &variance).map_err(|e| StageError::Input {
+                stage: id.into(),
+                message: format!("the path-traced fog cannot judge the effect: {e}"),
+                help: "aim the camera at lit surfaces, or set reference_samples: 0 to skip the check".into(),
+            })
+        };
         Ok(PhysicsCheck {
             size: [w, h],
             samples: self.reference_samples,
             ms: pt_ms,
-            reference_rel_stderr: rel_stderr,
-            attenuation_only_rel_rmse: att,
-            effect_rel_rmse: eff,
-            no_fog_rel_rmse: crate::render::rel_rmse(&vacuum, &fog),
-            reference_noise: noise,
-            attenuation_only_corrected: corrected(att),
-            effect_corrected: corrected(eff),
+            attenuation_only: judge(&out.attenuated)?,
+            effect: judge(&out.image)?,
+            no_fog: judge(&vacuum)?,
         })
     }
 }
