@@ -32,6 +32,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{StageContext, StageError, StageOutcome};
+use crate::report::noisy::NoiseCorrected;
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
 use crate::tables::FieldIssue;
@@ -140,8 +141,8 @@ pub struct ReferenceCheck {
     pub ms: f64,
     /// Mean relative standard error of the reference itself.
     pub reference_rel_stderr: f64,
-    /// Relative RMSE of each mode against the reference.
-    pub rel_rmse: Vec<(BakeMode, f64)>,
+    /// Each mode against the reference, relative to its mean, its noise removed, with its floor.
+    pub errors: Vec<(BakeMode, NoiseCorrected)>,
     /// Each mode's mean luminance over the texels divided by the reference's (the bias).
     pub mean_ratio: Vec<(BakeMode, f64)>,
 }
@@ -364,21 +365,33 @@ impl BakeLightmaps {
             outputs.push(exr);
             outputs.push(png);
         }
-        let reference = (self.reference_texels > 0).then(|| {
-            let (truth, rel, ms) =
-                report::reference(&scene, &bvh, &check_points, self.reference_samples, self.seed ^ 0x5eed);
-            ReferenceCheck {
-                texels: check_points.len(),
-                samples: self.reference_samples,
-                ms,
-                reference_rel_stderr: rel,
-                rel_rmse: check_modes.iter().map(|(m, e)| (*m, report::rel_rmse(e, &truth))).collect(),
-                mean_ratio: check_modes
+        let reference = (self.reference_texels > 0)
+            .then(|| {
+                let truth = report::reference(&scene, &bvh, &check_points, self.reference_samples, self.seed ^ 0x5eed);
+                let errors = check_modes
                     .iter()
-                    .map(|(m, e)| (*m, report::mean_luminance(e) / report::mean_luminance(&truth)))
-                    .collect(),
-            }
-        });
+                    .map(|(m, e)| {
+                        NoiseCorrected::of_rgb(e, &truth.mean, &truth.variance).map(|x| (*m, x)).map_err(|e| {
+                            fail(
+                                format!("the path-traced reference cannot judge the bake: {e}"),
+                                "light the baked surfaces, or set reference_texels: 0 to skip the check",
+                            )
+                        })
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                Ok(ReferenceCheck {
+                    texels: check_points.len(),
+                    samples: self.reference_samples,
+                    ms: truth.ms,
+                    reference_rel_stderr: truth.rel_stderr,
+                    errors,
+                    mean_ratio: check_modes
+                        .iter()
+                        .map(|(m, e)| (*m, report::mean_luminance(e) / report::mean_luminance(&truth.mean)))
+                        .collect(),
+                })
+            })
+            .transpose()?;
         let t0 = Instant::now();
         let probes = self.bake_probes(id, &scene, &bvh, table.as_ref(), &dir, &mut outputs)?;
         let probes_ms = if probes > 0 { ms(t0) } else { 0.0 };
@@ -423,9 +436,15 @@ impl BakeLightmaps {
             .collect::<Vec<_>>()
             .join(", ");
         let check = summary.reference.as_ref().map_or(String::new(), |r| {
-            let errs: Vec<String> =
-                r.rel_rmse.iter().map(|(m, e)| format!("{} {:.1} %", m.name(), 100.0 * e)).collect();
-            format!("; error vs path tracing on {} texels: {}", r.texels, errs.join(", "))
+            let errs: Vec<String> = r.errors.iter().map(|(m, e)| format!("{} {}", m.name(), e.percent())).collect();
+            let noise = r.errors.first().map_or(0.0, |e| e.1.reference_noise);
+            format!(
+                "; vs path tracing on {} texels ({} paths, noise {:.1} %): {}",
+                r.texels,
+                r.samples,
+                100.0 * noise,
+                errs.join(", ")
+            )
         });
         Ok(StageOutcome {
             outputs,
@@ -542,9 +561,11 @@ impl BakeLightmaps {
                 candidate_ms: row.ms,
                 speedup: row.speedup.unwrap_or(f64::NAN),
                 note: format!(
-                    "relative RMSE {:.4} vs a {}-path reference{}",
+                    "relative RMSE {}{:.4} vs a {}-path reference (floor {:.4}){}",
+                    if row.below_floor { "< " } else { "" },
                     row.rel_rmse,
                     r.converged.0,
+                    r.floor,
                     if row.extrapolated { "; reference time extrapolated (t^-1/2)" } else { "" }
                 ),
             });

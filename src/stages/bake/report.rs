@@ -5,9 +5,11 @@
 //! and a [`LadderOptions`] → [`BakeReport`]: rows (method, samples, wall time, relative RMSE), the speed-up
 //! of the bake over the reference at equal error, and a log-log PNG of error against time.
 //!
-//! **Error.** Relative RMSE over the texel subset and the three channels,
-//! `sqrt(Σ (E − E_ref)²) / sqrt(Σ E_ref²)`. The subset is every k-th `inside` texel of the atlas (same texels
-//! for every method), so run times are for those texels only; both methods trace on the same thread pool.
+//! **Error.** Relative RMSE over the texel subset and the three channels against the converged
+//! reference, relative to its mean, with its noise removed and its floor stated ([`NoiseCorrected`]):
+//! a rung below the floor is entered at the floor and marked, never as a smaller number. The subset is
+//! every k-th `inside` texel of the atlas (same texels for every method), so run times are for those
+//! texels only; both methods trace on the same thread pool.
 //!
 //! **Speed-up at equal error.** The bake's error at a rung is looked up on the reference's curve, which is
 //! interpolated log-log between rungs (Monte-Carlo error falls like `t^{-1/2}`); beyond the last rung it is
@@ -21,6 +23,7 @@ use serde::{Deserialize, Serialize};
 use super::transport::{Transport, TransportOptions};
 use super::{BakeLightmaps, BakeMode, TexelPoint, atlas, bake_points};
 use crate::reference::volpath::{self, SurfacePoint, VolPathOptions};
+use crate::report::noisy::NoiseCorrected;
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
 use crate::tables::zh_response::ZhResponseTable;
@@ -58,11 +61,13 @@ pub struct LadderRow {
     pub samples: u32,
     /// Wall time over the subset \[ms\].
     pub ms: f64,
-    /// Relative RMSE against the converged reference.
+    /// Relative RMSE against the converged reference, its noise removed (the floor when below it).
     pub rel_rmse: f64,
+    /// The error is below the converged reference's floor: `rel_rmse` is the floor, an upper bound.
+    pub below_floor: bool,
     /// For bake rows: reference time needed for the same error \[ms\] (log-log interpolated).
     pub reference_ms_at_equal_error: Option<f64>,
-    /// `reference_ms_at_equal_error / ms`.
+    /// `reference_ms_at_equal_error / ms` (a lower bound when `below_floor`).
     pub speedup: Option<f64>,
     /// The reference time was extrapolated beyond the ladder.
     pub extrapolated: bool,
@@ -77,6 +82,8 @@ pub struct BakeReport {
     pub texels: usize,
     /// Converged reference: samples, time \[ms\] and its own mean relative standard error.
     pub converged: (u32, f64, f64),
+    /// The smallest relative RMSE the converged reference resolves.
+    pub floor: f64,
     /// Rows.
     pub rows: Vec<LadderRow>,
 }
@@ -114,14 +121,20 @@ pub fn mean_luminance(a: &[[f64; 3]]) -> f64 {
     a.iter().map(|c| super::transport::luminance(*c)).sum::<f64>() / a.len().max(1) as f64
 }
 
-/// Runs the reference on `points`: (irradiance, mean relative standard error, ms).
-pub fn reference(
-    scene: &Scene,
-    bvh: &SceneBvh,
-    points: &[TexelPoint],
-    samples: u32,
-    seed: u64,
-) -> (Vec<[f64; 3]>, f64, f64) {
+/// The path-traced irradiance of texels.
+pub struct Reference {
+    /// Irradiance per texel \[W/m²\].
+    pub mean: Vec<[f64; 3]>,
+    /// Variance of each mean.
+    pub variance: Vec<[f64; 3]>,
+    /// Mean relative standard error (luminance).
+    pub rel_stderr: f64,
+    /// Time \[ms\].
+    pub ms: f64,
+}
+
+/// Runs the reference on `points`.
+pub fn reference(scene: &Scene, bvh: &SceneBvh, points: &[TexelPoint], samples: u32, seed: u64) -> Reference {
     let sp: Vec<SurfacePoint> =
         points.iter().map(|p| SurfacePoint { position: p.position, normal: p.normal }).collect();
     let opts = VolPathOptions {
@@ -144,7 +157,12 @@ pub fn reference(
         })
         .sum::<f64>()
         / est.len().max(1) as f64;
-    (est.iter().map(|e| e.mean).collect(), rel, ms)
+    Reference {
+        mean: est.iter().map(|e| e.mean).collect(),
+        variance: est.iter().map(|e| e.stderr.map(|s| s * s)).collect(),
+        rel_stderr: rel,
+        ms,
+    }
 }
 
 /// Bakes `points` in `mode` at `samples` (scatter samples scaled like the stage's default ratio): (irradiance, ms).
@@ -201,19 +219,26 @@ pub fn ladder(
 ) -> Result<BakeReport, String> {
     let points = subset(atlas, opts.texels);
     progress(&format!("{id}: converged reference, {} texels × {} paths", points.len(), opts.converged_samples));
-    let (truth, truth_rel, truth_ms) = reference(scene, bvh, &points, opts.converged_samples, 0x5eed_0001);
+    let truth = reference(scene, bvh, &points, opts.converged_samples, 0x5eed_0001);
+    let judge = |e: &[[f64; 3]]| {
+        NoiseCorrected::of_rgb(e, &truth.mean, &truth.variance)
+            .map_err(|e| format!("the converged reference cannot judge: {e}"))
+    };
     let mut rows = Vec::new();
     let mut ref_curve = Vec::new();
+    let floor = judge(&truth.mean)?.floor;
     for &s in &opts.reference_samples {
         progress(&format!("{id}: reference at {s} paths"));
-        let (e, _, ms) = reference(scene, bvh, &points, s, 0x5eed_0002);
-        let err = rel_rmse(&e, &truth);
-        ref_curve.push((ms, err));
+        let r = reference(scene, bvh, &points, s, 0x5eed_0002);
+        let err = judge(&r.mean)?;
+        let ms = r.ms;
+        ref_curve.push((ms, err.mse_or_floor().sqrt()));
         rows.push(LadderRow {
             method: "reference".into(),
             samples: s,
             ms,
-            rel_rmse: err,
+            rel_rmse: err.mse_or_floor().sqrt(),
+            below_floor: err.rel_rmse.is_none(),
             reference_ms_at_equal_error: None,
             speedup: None,
             extrapolated: false,
@@ -223,13 +248,15 @@ pub fn ladder(
     let push_bake = |mode: BakeMode, s: u32, rows: &mut Vec<LadderRow>| -> Result<(), String> {
         progress(&format!("{id}: bake {} at {s} samples", mode.name()));
         let (e, ms) = bake(scene, bvh, table, def, mode, s, &points)?;
-        let err = rel_rmse(&e, &truth);
+        let judged = judge(&e)?;
+        let err = judged.mse_or_floor().sqrt();
         let at = time_at_error(&ref_curve, err);
         rows.push(LadderRow {
             method: mode.name().into(),
             samples: s,
             ms,
             rel_rmse: err,
+            below_floor: judged.rel_rmse.is_none(),
             reference_ms_at_equal_error: at.map(|a| a.0),
             speedup: at.map(|a| a.0 / ms.max(1e-6)),
             extrapolated: at.is_some_and(|a| a.1),
@@ -245,7 +272,8 @@ pub fn ladder(
     Ok(BakeReport {
         stage: id.into(),
         texels: points.len(),
-        converged: (opts.converged_samples, truth_ms, truth_rel),
+        converged: (opts.converged_samples, truth.ms, truth.rel_stderr),
+        floor,
         rows,
     })
 }
@@ -285,7 +313,7 @@ pub fn plot(r: &BakeReport, dir: &Path) -> Result<std::path::PathBuf, String> {
 /// Markdown table of the rows.
 pub fn markdown(r: &BakeReport) -> String {
     let mut s = format!(
-        "## {}: lightmap error against run time\n\n{} texels; converged reference {} paths/texel in {:.0} ms (its mean relative standard error {:.2} %).\n\n| method | samples | ms | rel. RMSE | reference ms at equal error | speed-up |\n|---|---|---|---|---|---|\n",
+        "## {}: lightmap error against run time\n\n{} texels; converged reference {} paths/texel in {:.0} ms (its mean relative standard error {:.2} %). Errors relative to its mean with its noise removed; \"< X\": below the floor X it resolves.\n\n| method | samples | ms | rel. RMSE | reference ms at equal error | speed-up |\n|---|---|---|---|---|---|\n",
         r.stage,
         r.texels,
         r.converged.0,
@@ -296,8 +324,12 @@ pub fn markdown(r: &BakeReport) -> String {
         let eq = x
             .reference_ms_at_equal_error
             .map_or("—".into(), |t| format!("{t:.0}{}", if x.extrapolated { " (extrapolated)" } else { "" }));
-        let sp = x.speedup.map_or("—".into(), |v| format!("{v:.1}×"));
-        s += &format!("| {} | {} | {:.1} | {:.4} | {eq} | {sp} |\n", x.method, x.samples, x.ms, x.rel_rmse);
+        // Below the floor the bake's error is at most the floor, so the reference's time to match it is
+        // at least the time at the floor: the speed-up is a lower bound.
+        let ge = if x.below_floor { "≥ " } else { "" };
+        let sp = x.speedup.map_or("—".into(), |v| format!("{ge}{v:.1}×"));
+        let lt = if x.below_floor { "< " } else { "" };
+        s += &format!("| {} | {} | {:.1} | {lt}{:.4} | {eq} | {sp} |\n", x.method, x.samples, x.ms, x.rel_rmse);
     }
     s
 }
