@@ -57,11 +57,13 @@ fn effect_stages_render_the_bundled_scenes_and_meet_their_references() {
         }
     }
     let s = summary(&god);
-    let r = &s["reference"];
-    // Measured 3.3 % at this size (2048² default shadow map: 2.9 % at 320×240); the floor is the shadow
-    // map's discretisation, which the BVH marcher does not have.
-    let err = r["rel_rmse"].as_f64().unwrap();
-    assert!(err < 0.06, "god rays vs BVH marcher: {err}");
+    let r = &s["reference"]["error"];
+    // Measured at this size against the marcher's two-run mean, relative to its mean: raw 3.3 %, of which
+    // the marcher's jitter noise is 2.3 %; with it removed 2.43 % [2.39, 2.47] (floor 0.41 %). That is
+    // the 2048² shadow map's discretisation, which the BVH marcher does not have.
+    let err = r["rel_rmse"].as_f64().unwrap_or_else(|| panic!("above the floor: {r}"));
+    assert!(err < 0.04, "god rays vs BVH marcher: {r}");
+    assert!(r["raw_rel_rmse"].as_f64().unwrap() > err && r["floor"].as_f64().unwrap() < 0.01, "{r}");
     assert!(s["mean_inscatter"][0].as_f64().unwrap() > 0.0);
     assert!(god.join("godrays.png").exists() && god.join("inscatter.png").exists());
 
@@ -75,13 +77,21 @@ fn effect_stages_render_the_bundled_scenes_and_meet_their_references() {
     let ge = g["rel_rmse"].as_f64().unwrap();
     assert!(ge < 0.35, "filter vs gather: {ge}");
     let ph = &s["physics"];
-    let (att, eff) = (ph["attenuation_only_corrected"].as_f64().unwrap(), ph["effect_corrected"].as_f64().unwrap());
-    // Path-traced fog at 64 × 36, 256 paths per pixel: its own noise (≈ 7 %) is removed from both errors.
-    // Measured: attenuation only 6.3 %, with scattering 3.6 % (at 96 × 54: 9.0 % and 6.8 %; at 48 × 27
-    // the pixels are too coarse for the filter and the order flips: 4.5 % and 6.7 %).
-    assert!(ph["reference_noise"].as_f64().unwrap() < 0.1, "{ph}");
-    assert!(eff < 0.8 * att, "scattering must bring the image closer to path-traced fog: {eff} vs {att}");
-    assert!(ph["no_fog_rel_rmse"].as_f64().unwrap() > 3.0 * att, "{ph}");
+    // Path-traced fog at 64 × 36, 256 paths per pixel, errors relative to its mean: its noise is 72 % of
+    // the mean per pixel, so each error alone resolves only down to the floor of 63 % (measured:
+    // attenuation only 67 % [0, 98], with scattering < floor, no fog 1280 % [1243, 1316]; raw 0.98,
+    // 0.81 and 12.8). Which of two images is closer is a paired comparison: the reference's noise
+    // cancels in the difference of their squared errors, which is resolved far below either floor.
+    let raw = |k: &str| ph[k]["raw_rel_rmse"].as_f64().unwrap_or_else(|| panic!("{k}: {ph}"));
+    let noise = ph["effect"]["reference_noise"].as_f64().unwrap();
+    let (att2, eff2) = (raw("attenuation_only").powi(2) - noise * noise, raw("effect").powi(2) - noise * noise);
+    // Measured: corrected MSE 0.44 (attenuation only) against 0.14 (with scattering).
+    assert!(eff2 < 0.5 * att2, "scattering must bring the image closer to path-traced fog: {eff2} vs {att2}");
+    let no_fog = ph["no_fog"]["rel_rmse"].as_f64().unwrap();
+    assert!(no_fog > 10.0 && no_fog > 3.0 * att2.sqrt(), "{ph}");
+    for k in ["attenuation_only", "effect", "no_fog"] {
+        assert_eq!(ph[k]["floor"], ph["effect"]["floor"], "one reference, one floor: {ph}");
+    }
 }
 
 #[test]

@@ -149,7 +149,7 @@ fn god_rays(
         let img = crate::image_io::read_exr_rgb(&exr).map_err(|e| fail(e.to_string()))?;
         let values = img.rgb(None).ok_or_else(|| fail(format!("{}: no R, G, B", exr.display())))?;
         methods.push(Method {
-            name: format!("internal reference ({}-step BVH marcher)", stage.reference_steps),
+            name: format!("internal reference ({}-step BVH marcher, mean of 2 runs)", stage.reference_steps),
             values: values.iter().map(|p| p.map(f64::from)).collect(),
             ms: summary["reference"]["ms"].as_f64().unwrap_or(0.0),
         });

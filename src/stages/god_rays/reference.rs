@@ -10,8 +10,9 @@
 //! `V(x)·σ_s p(μ) L_in(x) · ∫_{stratum} e^{−σ_t s} ds` with `x` at a jittered position inside it. The
 //! transmittance integral is exact, so the estimate is exact for a constant integrand (an unshadowed
 //! untextured directional light) and converges as `O(steps⁻¹)` or faster otherwise. The jitter is
-//! counter-based ([`StreamKey`] keyed by the pixel, sample = stratum): images are identical for any
-//! thread count.
+//! counter-based ([`StreamKey`] keyed by the pixel, sample = stratum, dimension = run): images are
+//! identical for any thread count, and runs with different numbers are independent, which
+//! [`march_bvh_pair`] uses to measure the marcher's own noise.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -52,6 +53,8 @@ pub struct MarchCtx<'a> {
     pub frame: &'a LightFrame,
     /// Strata per ray (at least 1).
     pub steps: usize,
+    /// Jitter run: runs with different numbers draw independent jitter (0 by default).
+    pub run: u32,
 }
 
 impl MarchCtx<'_> {
@@ -126,7 +129,7 @@ impl MarchCtx<'_> {
         for k in 0..n {
             let a = s0 + k as f64 * dt;
             let b = if k + 1 == n { d } else { a + dt };
-            let t = a + key.uniform(k as u64, 0) * (b - a);
+            let t = a + key.uniform(k as u64, self.run) * (b - a);
             let p = self.cam.position + t * v;
             let inc = self.incident(p, v);
             if inc.iter().all(|&c| c <= 0.0) || !self.visible(p) {
@@ -169,6 +172,7 @@ pub fn march_shadow_map(
         medium,
         frame: &shadow.frame,
         steps: steps_per_ray,
+        run: 0,
     }
     .image()
 }
@@ -186,5 +190,42 @@ pub fn march_bvh(
     steps_per_ray: usize,
 ) -> RgbImage {
     let frame = LightFrame::new(light, bounds);
-    MarchCtx { cam, depth, light, vis: Visibility::Bvh(bvh), medium, frame: &frame, steps: steps_per_ray }.image()
+    MarchCtx { cam, depth, light, vis: Visibility::Bvh(bvh), medium, frame: &frame, steps: steps_per_ray, run: 0 }
+        .image()
+}
+
+/// [`march_bvh`] twice with independent jitter (runs 0 and 1): the mean of the two images and the
+/// variance of each pixel's mean, estimated as `(a − b)²/4` per channel. One degree of freedom per
+/// pixel: unbiased, so its mean over many pixels is a fair noise level (the floor built from it is
+/// conservative by `3^{1/4}`, since `E[(a − b)⁴] = 3 E[(a − b)²]²` for Gaussian noise).
+#[allow(clippy::too_many_arguments)]
+pub fn march_bvh_pair(
+    cam: &ViewCamera,
+    depth: &DistanceImage,
+    light: &EpiLight,
+    bvh: &SceneBvh,
+    medium: &EpiMedium,
+    bounds: ([f64; 3], [f64; 3]),
+    steps_per_ray: usize,
+) -> (RgbImage, Vec<[f64; 3]>) {
+    let frame = LightFrame::new(light, bounds);
+    let ctx = |run| MarchCtx {
+        cam,
+        depth,
+        light,
+        vis: Visibility::Bvh(bvh),
+        medium,
+        frame: &frame,
+        steps: steps_per_ray,
+        run,
+    };
+    let (a, b) = (ctx(0).image(), ctx(1).image());
+    let mut mean = a.clone();
+    let mut variance = Vec::with_capacity(a.data.len());
+    for ((m, x), y) in mean.data.iter_mut().zip(&a.data).zip(&b.data) {
+        let (x, y) = (x.map(f64::from), y.map(f64::from));
+        *m = std::array::from_fn(|c| (0.5 * (x[c] + y[c])) as f32);
+        variance.push(std::array::from_fn(|c| 0.25 * (x[c] - y[c]).powi(2)));
+    }
+    (mean, variance)
 }
