@@ -28,3 +28,34 @@ fn schema_documents_every_field_with_default_unit_and_range() {
     assert_eq!(props["mu_bins"]["default"], 1024);
     assert_eq!(s["$defs"]["PhaseHgRaw"]["additionalProperties"], false);
 }
+
+/// Issue 29: the schema documented no stage kind but PlotPhase; every kind a pipeline accepts now has
+/// each field's default, unit and range in both the JSON Schema and the reference page.
+#[test]
+fn every_stage_kind_is_documented() {
+    use voltab::stages::{bake, god_rays, image_fog, pop, translucent};
+    let s = voltab::pipeline::schema::json_schema();
+    let md = voltab::pipeline::schema::reference_markdown();
+    let kinds: [(&str, &[voltab::pipeline::params::FieldDoc]); 5] = [
+        (bake::BakeLightmapsRaw::KIND, bake::BakeLightmapsRaw::FIELDS),
+        (god_rays::EpipolarShadowsRaw::KIND, god_rays::EpipolarShadowsRaw::FIELDS),
+        (image_fog::ImageFogRaw::KIND, image_fog::ImageFogRaw::FIELDS),
+        (translucent::TranslucentRenderRaw::KIND, translucent::TranslucentRenderRaw::FIELDS),
+        (pop::PopRenderRaw::KIND, pop::PopRenderRaw::FIELDS),
+    ];
+    for (kind, fields) in kinds {
+        assert!(md.contains(&format!("### `{kind}`")), "{kind} missing from reference.md");
+        let props = &s["$defs"][format!("{kind}Raw")]["properties"];
+        assert!(fields.len() > 3, "{kind}");
+        for f in fields {
+            let p = &props[f.name];
+            assert!(
+                p.get("default").is_some() && p.get("x-unit").is_some() && p.get("x-range").is_some(),
+                "{kind}.{}: {p}",
+                f.name
+            );
+        }
+    }
+    // A spot value: the defaults are the declarations' (the god rays' 2048² shadow map).
+    assert_eq!(s["$defs"]["EpipolarShadowsRaw"]["properties"]["shadow_map"]["default"], 2048);
+}

@@ -9,10 +9,10 @@ independent runs, as the harness reports), per item (texel, pixel, point; channe
 - everything relative to the reference's converged mean level `norm = mean(r)` (never its maximum or a
   percentile, which noise inflates);
 - the floor: the smallest relative RMSE the comparison can tell from zero, sqrt(2 · se0) / norm with se0
-  the standard error of the corrected MSE of an exact method (the reference's noise alone: the squared
-  Gaussian noise of the n items); a corrected relative RMSE below it is reported as "< floor X", never
-  as a smaller number. It depends on the reference's noise only. (The variances come from
-  a few independent runs; their own uncertainty is not included.)
+  the standard error of the corrected MSE of an exact method (the squared Gaussian noise of the n items:
+  the reference's, plus the method's own when it is a Monte-Carlo estimate too); a corrected relative
+  RMSE below it is reported as "< floor X", never as a smaller number. (The variances come from a few
+  independent runs; their own uncertainty is not included.)
 """
 import math
 
@@ -29,18 +29,23 @@ def noise_corrected(a, r, var_r, var_a=None):
         raise ValueError("the reference's mean is not positive: an error relative to it is meaningless "
                          "(an empty reference judges nothing)")
     raw = float(np.mean((a - r) ** 2))
-    noise = float(np.mean(var_r)) + (float(np.mean(np.asarray(var_a, float))) if var_a is not None else 0.0)
-    corrected = raw - noise
-    # With no error, (a − r)² is the reference's squared noise: variance 2 var_r² per item (Gaussian
-    # means), so the corrected MSE of an exact method scatters by se0 = sqrt(mean(2 var_r²) / n).
-    se0 = math.sqrt(float(np.mean(2.0 * var_r**2)) / var_r.size)
+    if var_a is not None:
+        var_a = np.asarray(var_a, float).ravel()
+        if var_a.shape != a.shape:
+            raise ValueError(f"shapes differ: method {a.shape}, its variance {var_a.shape}")
+    # Both sides' noise: independent estimates, so the variances of a − r add.
+    var = var_r + var_a if var_a is not None else var_r
+    corrected = raw - float(np.mean(var))
+    # With no error, (a − r)² is the squared noise: variance 2 var² per item (Gaussian means), so the
+    # corrected MSE of an exact method scatters by se0 = sqrt(mean(2 var²) / n).
+    se0 = math.sqrt(float(np.mean(2.0 * var**2)) / var.size)
     floor = math.sqrt(2.0 * se0) / norm
     rel = math.sqrt(max(corrected, 0.0)) / norm
     below = rel < floor
-    # 95 % interval: per item (a − r)² has variance 2 var_r² + 4 d² var_r for a true difference d (Gaussian
-    # means), d² estimated by max((a − r)² − var_r, 0); the corrected MSE's standard error follows.
-    d2 = np.maximum((a - r) ** 2 - var_r, 0.0)
-    se = math.sqrt(float(np.sum(2.0 * var_r**2 + 4.0 * d2 * var_r))) / var_r.size
+    # 95 % interval: per item (a − r)² has variance 2 var² + 4 d² var for a true difference d (Gaussian
+    # means), d² estimated by max((a − r)² − var, 0); the corrected MSE's standard error follows.
+    d2 = np.maximum((a - r) ** 2 - var, 0.0)
+    se = math.sqrt(float(np.sum(2.0 * var**2 + 4.0 * d2 * var))) / var.size
     ci95 = [math.sqrt(max(corrected - 1.96 * se, 0.0)) / norm, math.sqrt(max(corrected + 1.96 * se, 0.0)) / norm]
     text = f"< floor {floor:.3g}" if below else f"{rel:.4g} (floor {floor:.3g})"
     return {"rel_rmse": None if below else rel, "floor": floor, "below_floor": below, "ci95": ci95,

@@ -12,7 +12,9 @@ A query may also carry `"minus_depth": k` (the estimate at max_depth k, from oth
 light of exactly the orders between, e.g. max_depth [2] minus 1 = single scattering and single surface
 reflection without directly visible emitters), or `"minus_export": "DIR"` (the same query on another
 export, e.g. the scene with its media's scattering turned into absorption, is subtracted) and `"methods": [{"name": ..., "values": [[r, g, b], ...]}]`
-(one RGB value per item, pixels row-major for images): each is compared with the reference by
+(one RGB value per item, pixels row-major for images; a method that is itself a Monte-Carlo estimate adds
+`"variance": [[r, g, b], ...]`, the variance of each value, and its noise is subtracted as well): each is
+compared with the reference by
 `compare.noise_corrected` into the result's `comparisons` (images with `"block": b` as means over b × b
 pixel blocks, so that a noisy reference still resolves the error at that scale).
 Result (`out`): per query and max_depth, `mean` (per item, RGB) and `var_of_mean` (the variance of the
@@ -300,10 +302,12 @@ def _comparison(method, mean, var, block=1, query=None):
     mean variance / b², the pixels' estimates being independent)."""
     try:
         a, r, vr = method["values"], np.asarray(mean).reshape(-1, 3), np.asarray(var).reshape(-1, 3)
+        va = np.asarray(method["variance"], float).reshape(-1, 3) if method.get("variance") is not None else None
         if block and block > 1:
             h, w = int(query["height"]), int(query["width"])
             a, r, vr = _blocks(a, h, w, block), _blocks(r, h, w, block), _blocks(vr, h, w, block) / block**2
-        c = _compare.noise_corrected(a, r, vr)
+            va = None if va is None else _blocks(va, h, w, block) / block**2
+        c = _compare.noise_corrected(a, r, vr, va)
     except (KeyError, ValueError) as e:
         return {"method": method.get("name"), "error": str(e)}
     c["method"] = method.get("name")

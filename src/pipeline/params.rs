@@ -86,6 +86,8 @@ macro_rules! declare_params {
         impl $raw {
             /// Kind name as written in RON.
             pub const KIND: &'static str = $kind;
+            /// What the kind does: its doc comment (the lines joined).
+            pub const ABOUT: &'static str = concat!($($sdoc, "\n"),*);
             /// Field documentation, in declaration order.
             pub const FIELDS: &'static [$crate::pipeline::params::FieldDoc] = &[
                 $( $crate::pipeline::params::FieldDoc {

@@ -7,7 +7,12 @@ use serde_json::{Value, json};
 
 use super::params::FieldDoc;
 use super::parse::PipelineFile;
+use crate::stages::bake::{BakeLightmaps, BakeLightmapsRaw};
+use crate::stages::god_rays::{EpipolarShadows, EpipolarShadowsRaw};
+use crate::stages::image_fog::{ImageFogRaw, ImageFogStage};
 use crate::stages::plot_phase::{PlotPhase, PlotPhaseRaw};
+use crate::stages::pop::{PopRender, PopRenderRaw};
+use crate::stages::translucent::{TranslucentRender, TranslucentRenderRaw};
 use crate::tables::ms_lobes::{MsLobes, MsLobesRaw};
 use crate::tables::phase_hg::{PhaseHg, PhaseHgRaw};
 use crate::tables::pop_preset::{PopPreset, PopPresetRaw};
@@ -46,14 +51,31 @@ fn table_kinds() -> Vec<KindDoc> {
     ]
 }
 
-/// Same for stage kinds.
+/// Same for stage kinds: every kind the pipeline accepts, described by its declaration's doc comment.
 fn stage_kinds() -> Vec<KindDoc> {
-    vec![(
-        PlotPhaseRaw::KIND,
-        "Plots a PhaseHg table's phase functions (log scale over angle) to a PNG, loading only the g slices it plots.",
-        PlotPhaseRaw::FIELDS,
-        PlotPhase::defaults_json(),
-    )]
+    vec![
+        (
+            PlotPhaseRaw::KIND,
+            "Plots a PhaseHg table's phase functions (log scale over angle) to a PNG, loading only the g slices it plots.",
+            PlotPhaseRaw::FIELDS,
+            PlotPhase::defaults_json(),
+        ),
+        (BakeLightmapsRaw::KIND, BakeLightmapsRaw::ABOUT, BakeLightmapsRaw::FIELDS, BakeLightmaps::defaults_json()),
+        (
+            EpipolarShadowsRaw::KIND,
+            EpipolarShadowsRaw::ABOUT,
+            EpipolarShadowsRaw::FIELDS,
+            EpipolarShadows::defaults_json(),
+        ),
+        (ImageFogRaw::KIND, ImageFogRaw::ABOUT, ImageFogRaw::FIELDS, ImageFogStage::defaults_json()),
+        (
+            TranslucentRenderRaw::KIND,
+            TranslucentRenderRaw::ABOUT,
+            TranslucentRenderRaw::FIELDS,
+            TranslucentRender::defaults_json(),
+        ),
+        (PopRenderRaw::KIND, PopRenderRaw::ABOUT, PopRenderRaw::FIELDS, PopRender::defaults_json()),
+    ]
 }
 
 /// JSON Schema of a pipeline file.
@@ -99,6 +121,7 @@ pub fn reference_markdown() -> String {
     for (title, kinds) in [("Table kinds", table_kinds()), ("Stage kinds", stage_kinds())] {
         s.push_str(&format!("## {title}\n\n"));
         for (kind, about, fields, defaults) in kinds {
+            let about = about.split_whitespace().collect::<Vec<_>>().join(" ");
             s.push_str(&format!("### `{kind}`\n\n{about}\n\n| field | type | default | unit | valid range | meaning |\n|---|---|---|---|---|---|\n"));
             for f in fields {
                 let d = defaults.iter().find(|(n, _)| *n == f.name).map_or_else(String::new, |(_, v)| v.to_string());

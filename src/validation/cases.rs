@@ -21,12 +21,14 @@
 //! - `TranslucentRender` (wang2018): per material, the full image against Mitsuba's image of the scene
 //!   with that material's medium inside the object's dielectric boundary (all transport); point lights
 //!   become the stage's spheres of `light_radius` with the same intensity, on both sides. The stage's own
-//!   path tracer (`reference_samples`) is judged on the same pixels.
+//!   path tracer (`reference_samples`) is judged on the same pixels, its own per-pixel variance
+//!   subtracted as well (`Method::variance`).
 //! - `EpipolarShadows` (baran2010): the in-scattered radiance image (single scattering of the one light
 //!   the stage uses, shadowed by the scene) against Mitsuba's image of the same camera with every surface
 //!   black and only that light, max_depth 2 minus max_depth 1: exactly the light that scattered once in
-//!   the medium, attenuated on both legs. The stage's own BVH marcher (`reference_steps`) is judged on
-//!   the same pixels.
+//!   the medium, attenuated on both legs. The stage's own BVH marcher (`reference_steps`, the mean of
+//!   two independently jittered runs) is judged on the same pixels, its noise from the two runs
+//!   subtracted as well.
 
 use std::path::Path;
 use std::time::Instant;
@@ -86,7 +88,7 @@ fn bake(
     let methods = check
         .modes
         .iter()
-        .map(|(mode, values, ms)| Method { name: mode.name().into(), values: values.clone(), ms: *ms })
+        .map(|(mode, values, ms)| Method { name: mode.name().into(), values: values.clone(), ms: *ms, variance: None })
         .collect();
     let caveats = vec![format!(
         "only the Full mode claims all of Mitsuba's light; Surface leaves the media out and Shadow lets them \
@@ -142,16 +144,23 @@ fn god_rays(
     let ms = summary["phases_ms"][6].as_f64().unwrap_or(wall_ms);
 
     let (mut scene, camera) = scene_and_camera(id, &stage.scene_path(ctx.base_dir), stage.camera)?;
-    let mut methods =
-        vec![Method { name: "epipolar".into(), values: inscatter.iter().map(|p| p.map(f64::from)).collect(), ms }];
+    let mut methods = vec![Method {
+        name: "epipolar".into(),
+        values: inscatter.iter().map(|p| p.map(f64::from)).collect(),
+        ms,
+        variance: None,
+    }];
     if stage.reference_steps > 0 {
         let exr = dir.join("marcher.exr");
         let img = crate::image_io::read_exr_rgb(&exr).map_err(|e| fail(e.to_string()))?;
         let values = img.rgb(None).ok_or_else(|| fail(format!("{}: no R, G, B", exr.display())))?;
+        let variance =
+            img.rgb(Some("variance")).ok_or_else(|| fail(format!("{}: no variance layer", exr.display())))?;
         methods.push(Method {
             name: format!("internal reference ({}-step BVH marcher, mean of 2 runs)", stage.reference_steps),
             values: values.iter().map(|p| p.map(f64::from)).collect(),
             ms: summary["reference"]["ms"].as_f64().unwrap_or(0.0),
+            variance: Some(variance.iter().map(|p| p.map(f64::from)).collect()),
         });
     }
     let mut caveats = single_scattering_view(&mut scene).map_err(fail)?;
@@ -285,9 +294,9 @@ fn image_fog(
         export,
         query: Query::Image { width, height, spp, max_depth: vec![-1], minus_depth: None, block: Some(4) },
         methods: vec![
-            Method { name: "fog".into(), values: values(&out.image), ms },
-            Method { name: "attenuation only".into(), values: values(&out.attenuated), ms },
-            Method { name: "no fog".into(), values: values(&colour), ms: 0.0 },
+            Method { name: "fog".into(), values: values(&out.image), ms, variance: None },
+            Method { name: "attenuation only".into(), values: values(&out.attenuated), ms, variance: None },
+            Method { name: "no fog".into(), values: values(&colour), ms: 0.0, variance: None },
         ],
         caveats,
     })
@@ -372,7 +381,12 @@ fn pop_render(
         minus_scene: Some(absorbing),
         export: ExportOptions { camera: Some(camera), width, height: Some(height), spp, texels: 0 },
         query: Query::Image { width, height, spp, max_depth: vec![-1], minus_depth: None, block: Some(4) },
-        methods: vec![Method { name: "pop".into(), values: scattered.iter().map(|p| p.map(f64::from)).collect(), ms }],
+        methods: vec![Method {
+            name: "pop".into(),
+            values: scattered.iter().map(|p| p.map(f64::from)).collect(),
+            ms,
+            variance: None,
+        }],
         caveats,
     }))
 }
@@ -457,12 +471,6 @@ fn translucent(
         .position(|m| matches!(m.boundary, crate::scene::Boundary::Mesh(_)))
         .ok_or_else(|| fail("the scene has no medium bounded by a mesh".into()))?;
     let mut caveats = Vec::new();
-    if stage.reference_samples > 0 {
-        caveats.push(format!(
-            "the internal path tracer's own noise ({} paths per pixel) is not subtracted: its error is an upper bound",
-            stage.reference_samples
-        ));
-    }
     if let Some(skipped) = summary["skipped_lights"].as_array().filter(|a| !a.is_empty()) {
         caveats.push(format!("lights the stage leaves out are in the reference: {skipped:?}"));
     }
@@ -476,16 +484,23 @@ fn translucent(
         let exr = dir.join(format!("{name}.exr"));
         let img = crate::image_io::read_exr_rgb(&exr).map_err(|e| fail(e.to_string()))?;
         let values = img.rgb(None).ok_or_else(|| fail(format!("{}: no R, G, B", exr.display())))?;
-        let mut methods =
-            vec![Method { name: "point-based".into(), values: values.iter().map(|p| p.map(f64::from)).collect(), ms }];
+        let mut methods = vec![Method {
+            name: "point-based".into(),
+            values: values.iter().map(|p| p.map(f64::from)).collect(),
+            ms,
+            variance: None,
+        }];
         if stage.reference_samples > 0 {
             let exr = dir.join(format!("{name}_reference.exr"));
             let img = crate::image_io::read_exr_rgb(&exr).map_err(|e| fail(e.to_string()))?;
             let values = img.rgb(None).ok_or_else(|| fail(format!("{}: no R, G, B", exr.display())))?;
+            let variance =
+                img.rgb(Some("variance")).ok_or_else(|| fail(format!("{}: no variance layer", exr.display())))?;
             methods.push(Method {
                 name: format!("internal reference (path tracer, {} paths)", stage.reference_samples),
                 values: values.iter().map(|p| p.map(f64::from)).collect(),
                 ms: m["comparison"]["reference_ms"].as_f64().unwrap_or(0.0),
+                variance: Some(variance.iter().map(|p| p.map(f64::from)).collect()),
             });
         }
         let mut sc = scene.clone();

@@ -79,6 +79,10 @@ pub struct Method {
     pub values: Vec<[f64; 3]>,
     /// The method's wall time for these values \[ms\].
     pub ms: f64,
+    /// Variance of each value when the method is itself a Monte-Carlo estimate (an internal
+    /// reference): the harness subtracts it too, so its error is not inflated by its own noise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub variance: Option<Vec<[f64; 3]>>,
 }
 
 /// A stage made comparable.
@@ -215,7 +219,14 @@ pub fn judge(case: &Case, dir: &Path, harness: &python::Harness) -> Result<Stage
         query["minus_export"] = "mitsuba_minus".into();
     }
     query["name"] = slug(&case.stage).into();
-    query["methods"] = case.methods.iter().map(|m| serde_json::json!({"name": m.name, "values": m.values})).collect();
+    query["methods"] = case
+        .methods
+        .iter()
+        .map(|m| match &m.variance {
+            Some(v) => serde_json::json!({"name": m.name, "values": m.values, "variance": v}),
+            None => serde_json::json!({"name": m.name, "values": m.values}),
+        })
+        .collect();
     let request = serde_json::json!({
         "export": "mitsuba", "out": "reference.json", "variant": "auto", "runs": runs, "seed": 0,
         "queries": [query],

@@ -23,6 +23,26 @@ def test_known_error_is_recovered_under_reference_noise():
     assert not out["below_floor"]
 
 
+def test_a_noisy_method_has_its_own_noise_subtracted_too():
+    # An internal reference judged by Mitsuba is a Monte-Carlo estimate itself: with its variance given,
+    # its 5 % bias is recovered under both sides' noise, and without it the error would read as its noise.
+    rng = np.random.default_rng(3)
+    truth = rng.uniform(0.5, 1.5, 20000)
+    sa, sr = 0.15, 0.1
+    a = truth * 1.05 + rng.normal(0, sa, truth.size)
+    r = truth + rng.normal(0, sr, truth.size)
+    want = np.sqrt(np.mean((0.05 * truth) ** 2)) / np.mean(truth)
+    out = noise_corrected(a, r, np.full(truth.size, sr**2), np.full(truth.size, sa**2))
+    assert out["rel_rmse"] == pytest.approx(want, rel=0.15)
+    assert out["ci95"][0] <= want <= out["ci95"][1]
+    only_r = noise_corrected(a, r, np.full(truth.size, sr**2))
+    assert only_r["rel_rmse"] > 2.5 * want  # the method's noise counted as its error
+    # The floor counts both sides' noise: larger than with the reference's alone.
+    assert out["floor"] > only_r["floor"]
+    with pytest.raises(ValueError, match="its variance"):
+        noise_corrected(a, r, np.full(truth.size, sr**2), np.ones(3))
+
+
 def test_error_below_the_noise_floor_is_reported_as_a_floor():
     rng = np.random.default_rng(2)
     truth = np.ones(50)

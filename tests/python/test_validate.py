@@ -157,8 +157,12 @@ def test_internal_references_are_judged_too(validation):
     epi = method(stages, "window_room_god_rays", "epipolar")
     marcher = method(stages, "window_room_god_rays", "internal reference (128-step BVH marcher, mean of 2 runs)")
     assert abs(epi["method_mean"] / marcher["method_mean"] - 1) < 0.01, (epi, marcher)
-    assert marcher["rel_rmse"] is not None and marcher["floor"] <= 0.05, marcher
+    # Its own jitter noise (from its two runs) is subtracted too: measured 2.7 % [0.7, 3.8] (floor 2.4 %);
+    # 4.4 % while that noise was counted as its error.
+    assert marcher["floor"] <= 0.05 and (marcher["rel_rmse"] or 0.0) <= 0.05, marcher
     assert abs(marcher["method_mean"] / marcher["reference_mean"] - 1) <= 0.03, marcher
+    # The translucent path tracer's own noise (256 paths) is subtracted: Wax < floor 15.7 %, Oil 21.0 %
+    # [9.2, 28.2] (floor 18.3 %), Skin < floor 44 %; its means are within 2 % of Mitsuba's.
     for name in ("Wax", "Oil", "Skin"):
         pt = method(stages, f"translucent_materials/{name}", "internal reference (path tracer, 256 paths)")
-        assert pt["floor"] is not None and pt["reference_mean"] > 0, pt
+        assert pt["floor"] is not None and abs(pt["method_mean"] / pt["reference_mean"] - 1) <= 0.03, pt

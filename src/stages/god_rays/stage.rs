@@ -55,7 +55,8 @@ crate::declare_params! {
         slice_density: f64 = 1.0, unit = "", range = "0.05 to 8";
         /// View-ray samples per pixel along an epipolar line.
         samples_per_pixel: f64 = 1.0, unit = "", range = "0.05 to 8";
-        /// Steps per ray of a BVH shadow-ray marcher to compare against (0: no comparison).
+        /// Steps per ray of a BVH shadow-ray marcher to compare against, run twice with independent
+        /// jitter to measure its own noise (0: no comparison).
         reference_steps: u32 = 0, unit = "steps", range = "0 to 100000";
         /// Coloured light ("cookie"): an EXR (R, G, B multipliers), relative to the pipeline file, projected
         /// along the light over the shadow map's window (directional) or through the cone (spot); empty: white.
@@ -253,9 +254,15 @@ impl EpipolarShadows {
             let ref_ms = ms(t0);
             (truth, ref_ms)
         });
-        if let Some(((truth, _), _)) = &reference {
-            // The marcher's image beside the method's, for comparisons elsewhere (`voltab validate`).
-            outputs.extend(view::write_image(id, &dir, "marcher", truth, &[])?);
+        if let Some(((truth, variance), _)) = &reference {
+            // The marcher's image and the variance of each pixel beside the method's, for comparisons
+            // elsewhere (`voltab validate`).
+            let var = crate::render::Image {
+                width: truth.width,
+                height: truth.height,
+                data: variance.iter().map(|v| v.map(|x| x as f32)).collect(),
+            };
+            outputs.extend(view::write_image(id, &dir, "marcher", truth, &[("variance", &var)])?);
         }
         let reference = reference
             .map(|((truth, variance), ref_ms)| -> Result<GodRaysCheck, StageError> {

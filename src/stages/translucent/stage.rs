@@ -455,7 +455,7 @@ impl TranslucentRender {
             dir,
             &format!("{name}_reference"),
             &img(&reference.total()),
-            &[("point_based", &img(&frame.total()))],
+            &[("point_based", &img(&frame.total())), ("variance", &img(&reference.variance))],
         )?;
         Ok((c, files))
     }
