@@ -53,6 +53,16 @@ fn translucent_stage_renders_components_and_compares_with_path_tracing() {
         let (mse, noise) = (c["mse"].as_f64().unwrap(), c["reference_noise"].as_f64().unwrap());
         assert!(mse.is_finite() && noise > 0.0);
         assert!((c["mse_corrected"].as_f64().unwrap() - (mse - noise).max(0.0)).abs() < 1e-12);
+        // The relative error is the same MSE against the reference's mean (`report::noisy`): above its
+        // floor its square is the corrected MSE divided by the squared mean over the scale.
+        let (pe, pb) = (&c["error"], &c["block_error"]);
+        if let Some(rel) = pe["rel_rmse"].as_f64() {
+            let want = c["mse_corrected"].as_f64().unwrap()
+                * (c["scale"].as_f64().unwrap() / pe["norm"].as_f64().unwrap()).powi(2);
+            assert!((rel * rel - want).abs() <= 1e-9 * want.max(1e-30), "{c}");
+        }
+        // Block means (4 × 4 px) carry less noise per item: the reference resolves a smaller error there.
+        assert!(pb["reference_noise"].as_f64().unwrap() < pe["reference_noise"].as_f64().unwrap(), "{c}");
         // Pre-processing, four passes, total.
         let t: Vec<f64> = e["times_ms"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
         assert!((t[0] + t[1] + t[2] + t[3] + t[4] - t[5]).abs() < 1e-6 * t[5]);

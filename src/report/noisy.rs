@@ -119,7 +119,9 @@ impl NoiseCorrected {
 /// A fraction in per cent with two significant figures (one decimal at least).
 fn pct(x: f64) -> String {
     let p = 100.0 * x;
-    if p >= 10.0 {
+    if p == 0.0 {
+        "0".into()
+    } else if p >= 10.0 {
         format!("{p:.0}")
     } else if p >= 0.1 {
         format!("{p:.1}")
