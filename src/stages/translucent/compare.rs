@@ -71,6 +71,9 @@ pub struct Comparison {
     pub lower_bound: bool,
 }
 
+/// RGB values per item.
+type Rgbs = Vec<[f64; 3]>;
+
 /// Side of the blocks of the block-scale error \[px\].
 pub const BLOCK: usize = 4;
 
@@ -82,7 +85,7 @@ fn block_means(
     var: &[[f64; 3]],
     mask: &[bool],
     width: usize,
-) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<[f64; 3]>) {
+) -> (Rgbs, Rgbs, Rgbs) {
     let height = mask.len() / width.max(1);
     let (bw, bh) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
     let mut acc = vec![([0.0; 3], [0.0; 3], [0.0; 3], 0usize); bw * bh];
