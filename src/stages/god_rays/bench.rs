@@ -215,7 +215,7 @@ impl Inputs {
 
     /// The converged reference: BVH marcher with `steps` per ray.
     pub fn reference(&self, steps: usize) -> RgbImage {
-        march_bvh(&self.cam, &self.depth, &self.light, &self.bvh, &self.medium, self.bounds, steps)
+        march_bvh(&self.cam, &self.depth, &self.light, &self.bvh, &self.medium, self.bounds, steps, 0)
     }
 }
 

@@ -74,7 +74,7 @@ use crate::render::{DistanceImage, Image, RgbImage, ViewCamera};
 use crate::scene::{Boundary, Density, LightKind, Scene};
 
 pub use bench::{BenchReport, ErrorTimePoint, bench, error_vs_time, write_error_plot};
-pub use reference::{march_bvh, march_bvh_pair, march_shadow_map};
+pub use reference::{march_bvh, march_shadow_map, mean_of_runs};
 pub use shadow_map::{LightFrame, ShadowMap, render_shadow_map, trace_shadow_map};
 
 /// A light for the epipolar effect (world space, metres, unit directions).

@@ -12,7 +12,7 @@
 //! untextured directional light) and converges as `O(steps⁻¹)` or faster otherwise. The jitter is
 //! counter-based ([`StreamKey`] keyed by the pixel, sample = stratum, dimension = run): images are
 //! identical for any thread count, and runs with different numbers are independent, which
-//! [`march_bvh_pair`] uses to measure the marcher's own noise.
+//! [`mean_of_runs`] uses to measure the marcher's own noise.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -179,7 +179,8 @@ pub fn march_shadow_map(
 
 /// Ray marcher casting a real shadow ray through `bvh` at every step (no shadow-map aliasing);
 /// `bounds` are the scene bounds (the window the light texture is projected over, as in
-/// [`super::render_shadow_map`]).
+/// [`super::render_shadow_map`]); `run` picks the jitter (runs with different numbers are independent).
+#[allow(clippy::too_many_arguments)]
 pub fn march_bvh(
     cam: &ViewCamera,
     depth: &DistanceImage,
@@ -188,38 +189,17 @@ pub fn march_bvh(
     medium: &EpiMedium,
     bounds: ([f64; 3], [f64; 3]),
     steps_per_ray: usize,
+    run: u32,
 ) -> RgbImage {
     let frame = LightFrame::new(light, bounds);
-    MarchCtx { cam, depth, light, vis: Visibility::Bvh(bvh), medium, frame: &frame, steps: steps_per_ray, run: 0 }
-        .image()
+    MarchCtx { cam, depth, light, vis: Visibility::Bvh(bvh), medium, frame: &frame, steps: steps_per_ray, run }.image()
 }
 
-/// [`march_bvh`] twice with independent jitter (runs 0 and 1): the mean of the two images and the
-/// variance of each pixel's mean, estimated as `(a − b)²/4` per channel. One degree of freedom per
-/// pixel: unbiased, so its mean over many pixels is a fair noise level (the floor built from it is
-/// conservative by `3^{1/4}`, since `E[(a − b)⁴] = 3 E[(a − b)²]²` for Gaussian noise).
-#[allow(clippy::too_many_arguments)]
-pub fn march_bvh_pair(
-    cam: &ViewCamera,
-    depth: &DistanceImage,
-    light: &EpiLight,
-    bvh: &SceneBvh,
-    medium: &EpiMedium,
-    bounds: ([f64; 3], [f64; 3]),
-    steps_per_ray: usize,
-) -> (RgbImage, Vec<[f64; 3]>) {
-    let frame = LightFrame::new(light, bounds);
-    let ctx = |run| MarchCtx {
-        cam,
-        depth,
-        light,
-        vis: Visibility::Bvh(bvh),
-        medium,
-        frame: &frame,
-        steps: steps_per_ray,
-        run,
-    };
-    let (a, b) = (ctx(0).image(), ctx(1).image());
+/// Two independently jittered marcher images `a`, `b` → their mean and the variance of each pixel's
+/// mean, estimated as `(a − b)²/4` per channel. One degree of freedom per pixel: unbiased, so its mean
+/// over many pixels is a fair noise level (a floor built from it is conservative by `3^{1/4}`, since
+/// `E[(a − b)⁴] = 3 E[(a − b)²]²` for Gaussian noise).
+pub fn mean_of_runs(a: &RgbImage, b: &RgbImage) -> (RgbImage, Vec<[f64; 3]>) {
     let mut mean = a.clone();
     let mut variance = Vec::with_capacity(a.data.len());
     for ((m, x), y) in mean.data.iter_mut().zip(&a.data).zip(&b.data) {

@@ -236,7 +236,7 @@ fn unshadowed_directional_matches_closed_form_for_every_epipole() {
         // The marchers converge on it (exact stratum transmittance; the light's attenuation varies by
         // well under 1 % across one of 256 strata).
         let sm = march_shadow_map(&cam, &depth, &light, &shadow, &m, 256);
-        let bm = march_bvh(&cam, &depth, &light, &bvh, &m, BOX, 256);
+        let bm = march_bvh(&cam, &depth, &light, &bvh, &m, BOX, 256, 0);
         let (es, eb) = (max_rel(&sm, &want), max_rel(&bm, &want));
         assert!(es < 2e-3 && eb < 2e-3, "{name}: marchers {es} {eb}");
     }
@@ -325,7 +325,7 @@ fn half_plane_shadow_matches_the_analytic_lit_interval() {
         }
     }
     let shadow = render_shadow_map(&bvh, &light, bounds, 2048);
-    let bm = march_bvh(&cam, &depth, &light, &bvh, &m, bounds, 256);
+    let bm = march_bvh(&cam, &depth, &light, &bvh, &m, bounds, 256, 0);
     let sm = march_shadow_map(&cam, &depth, &light, &shadow, &m, 256);
     let out = render(&cam, &depth, &light, &shadow, &m, &EpipolarOptions::default());
     let (eb, es, ee) = (rel_rmse(&bm, &want), rel_rmse(&sm, &want), rel_rmse(&out.inscatter, &want));
@@ -455,7 +455,7 @@ fn results_are_identical_for_one_and_two_threads() {
             let shadow = render_shadow_map(&bvh, &light, BOX, 128);
             let out = render(&cam, &depth, &light, &shadow, &m, &EpipolarOptions::default());
             let sm = march_shadow_map(&cam, &depth, &light, &shadow, &m, 16);
-            let bm = march_bvh(&cam, &depth, &light, &bvh, &m, BOX, 8);
+            let bm = march_bvh(&cam, &depth, &light, &bvh, &m, BOX, 8, 0);
             (shadow, out.inscatter, out.transmittance, sm, bm)
         })
     };

@@ -79,13 +79,7 @@ pub const BLOCK: usize = 4;
 
 /// Means over `BLOCK` × `BLOCK` blocks of the masked pixels of a `width`-wide image: (method, reference,
 /// variance of the reference's block mean) per block holding at least one masked pixel.
-fn block_means(
-    a: &[[f64; 3]],
-    r: &[[f64; 3]],
-    var: &[[f64; 3]],
-    mask: &[bool],
-    width: usize,
-) -> (Rgbs, Rgbs, Rgbs) {
+fn block_means(a: &[[f64; 3]], r: &[[f64; 3]], var: &[[f64; 3]], mask: &[bool], width: usize) -> (Rgbs, Rgbs, Rgbs) {
     let height = mask.len() / width.max(1);
     let (bw, bh) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
     let mut acc = vec![([0.0; 3], [0.0; 3], [0.0; 3], 0usize); bw * bh];
