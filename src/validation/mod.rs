@@ -402,7 +402,8 @@ pub fn markdown(v: &Validation) -> String {
             let err = match (m.rel_rmse, m.ci95) {
                 (Some(e), Some([lo, hi])) => format!("{:.1} % [{:.1}, {:.1}]", 100.0 * e, 100.0 * lo, 100.0 * hi),
                 (Some(e), None) => format!("{:.1} %", 100.0 * e),
-                (None, _) => m.text.clone(),
+                // Below the floor: the floor in the table's unit (per cent), as the floor column states it.
+                (None, _) => m.floor.map_or_else(|| m.text.clone(), |f| format!("< floor {:.1} %", 100.0 * f)),
             };
             let pct = |x: Option<f64>| x.map_or("—".into(), |x| format!("{:.2} %", 100.0 * x));
             s.push_str(&format!(
@@ -521,7 +522,7 @@ mod tests {
         let v =
             Validation { pipeline: "p.ron".into(), quality: Quality::Full, stages: vec![stage(method(None, 0.04))] };
         let md = markdown(&v);
-        assert!(md.contains("| < floor 0.04 | 4.00 % |"), "{md}");
+        assert!(md.contains("| < floor 4.0 % | 4.00 % |"), "{md}");
     }
 
     #[test]
