@@ -95,10 +95,32 @@ impl NoiseCorrected {
         Self::of(&flat(a), &flat(r), &flat(var_r))
     }
 
-    /// The noise-corrected relative MSE, `rel_rmse²`, or the floor's square when below it (the
-    /// smallest MSE the comparison can claim).
+    /// [`Self::of_rgb`] over the items where `mask` is true (all three slices are as long as `mask`).
+    ///
+    /// # Errors
+    /// As [`Self::of`].
+    pub fn of_rgb_masked(a: &[[f64; 3]], r: &[[f64; 3]], var_r: &[[f64; 3]], mask: &[bool]) -> Result<Self, String> {
+        if a.len() != mask.len() {
+            return Err(format!("lengths differ: method {}, mask {}", a.len(), mask.len()));
+        }
+        let kept = |x: &[[f64; 3]]| x.iter().zip(mask).filter(|(_, m)| **m).map(|(p, _)| *p).collect::<Vec<_>>();
+        Self::of_rgb(&kept(a), &kept(r), &kept(var_r))
+    }
+
+    /// The error is below the floor (`rel_rmse` is `None`).
+    pub fn below_floor(&self) -> bool {
+        self.rel_rmse.is_none()
+    }
+
+    /// The noise-corrected relative RMSE, or the floor when below it (the largest error the comparison
+    /// cannot rule out there: an upper bound).
+    pub fn rel_or_floor(&self) -> f64 {
+        self.rel_rmse.unwrap_or(self.floor)
+    }
+
+    /// `rel_or_floor²`: the relative MSE, or the smallest MSE the comparison can claim.
     pub fn mse_or_floor(&self) -> f64 {
-        self.rel_rmse.unwrap_or(self.floor).powi(2)
+        self.rel_or_floor().powi(2)
     }
 
     /// Report wording in per cent: "12.3 % [11.9, 12.8] (floor 0.4 %)" or "< floor 0.4 %".
@@ -181,6 +203,19 @@ mod tests {
         let want = ((99.0 * 0.01 + 100.0) / 100.0f64).sqrt() / 1.99;
         assert!((e.rel_rmse.unwrap() - want).abs() < 1e-12);
         assert_eq!(e.floor, 0.0);
+    }
+
+    /// The masked form compares exactly the kept items; a mask of another length is refused.
+    #[test]
+    fn masked_items_are_the_kept_ones() {
+        let a = [[1.0; 3], [50.0; 3], [2.0; 3]];
+        let r = [[1.5; 3], [1.0; 3], [2.5; 3]];
+        let v = [[0.01; 3]; 3];
+        let m = NoiseCorrected::of_rgb_masked(&a, &r, &v, &[true, false, true]).unwrap();
+        assert_eq!(m, NoiseCorrected::of_rgb(&[a[0], a[2]], &[r[0], r[2]], &[v[0], v[2]]).unwrap());
+        // Above the floor (a 0.5 offset against noise 0.1): the number itself.
+        assert!(!m.below_floor() && m.rel_or_floor() == m.rel_rmse.unwrap());
+        assert!(NoiseCorrected::of_rgb_masked(&a, &r, &v, &[true]).unwrap_err().contains("mask"));
     }
 
     #[test]

@@ -232,13 +232,13 @@ pub fn ladder(
         let r = reference(scene, bvh, &points, s, 0x5eed_0002);
         let err = judge(&r.mean)?;
         let ms = r.ms;
-        ref_curve.push((ms, err.mse_or_floor().sqrt()));
+        ref_curve.push((ms, err.rel_or_floor()));
         rows.push(LadderRow {
             method: "reference".into(),
             samples: s,
             ms,
-            rel_rmse: err.mse_or_floor().sqrt(),
-            below_floor: err.rel_rmse.is_none(),
+            rel_rmse: err.rel_or_floor(),
+            below_floor: err.below_floor(),
             reference_ms_at_equal_error: None,
             speedup: None,
             extrapolated: false,
@@ -249,14 +249,14 @@ pub fn ladder(
         progress(&format!("{id}: bake {} at {s} samples", mode.name()));
         let (e, ms) = bake(scene, bvh, table, def, mode, s, &points)?;
         let judged = judge(&e)?;
-        let err = judged.mse_or_floor().sqrt();
+        let err = judged.rel_or_floor();
         let at = time_at_error(&ref_curve, err);
         rows.push(LadderRow {
             method: mode.name().into(),
             samples: s,
             ms,
             rel_rmse: err,
-            below_floor: judged.rel_rmse.is_none(),
+            below_floor: judged.below_floor(),
             reference_ms_at_equal_error: at.map(|a| a.0),
             speedup: at.map(|a| a.0 / ms.max(1e-6)),
             extrapolated: at.is_some_and(|a| a.1),

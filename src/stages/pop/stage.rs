@@ -926,7 +926,8 @@ impl PopRender {
 
 /// Path-traces `scene`'s scattered light as POP sees it ([`pop_scene::scattering_reference_scene`]) from
 /// `cam` with `samples` paths per pixel and compares `pop` with it; returns the comparison (POP time 0)
-/// and the reference image, or why the reference cannot judge (it is black where compared). The environment's part (when the stage has one) comes from
+/// and the reference image, or why the reference cannot judge (it is black where compared). The
+/// environment's part (when the stage has one) comes from
 /// [`crate::reference::grid_mc::render_environment`] on POP's voxel medium with the scene's surfaces as
 /// black occluders, and is added to the lights' part (the scattered light is linear in the sources;
 /// the two estimates are independent, so their variances add).
@@ -989,11 +990,9 @@ pub fn compare_with_reference(
         data: pop.data.iter().zip(&masked).map(|(v, &m)| if m { [0.0; 3] } else { *v }).collect(),
     };
     let pop = &pop_kept;
-    let compared = |img: &[[f64; 3]]| -> Vec<[f64; 3]> {
-        img.iter().zip(&masked).filter(|(_, m)| !**m).map(|(p, _)| *p).collect()
-    };
+    let compared: Vec<bool> = masked.iter().map(|m| !m).collect();
     let pop_f64: Vec<[f64; 3]> = pop.data.iter().map(|p| p.map(f64::from)).collect();
-    let error = NoiseCorrected::of_rgb(&compared(&pop_f64), &compared(&mean), &compared(&variance))?;
+    let error = NoiseCorrected::of_rgb_masked(&pop_f64, &mean, &variance, &compared)?;
     let sum = |i: &RgbImage| i.data.iter().map(|c| c.iter().map(|&v| f64::from(v)).sum::<f64>()).sum::<f64>();
     let r = sum(&img);
     let c = ReferenceComparison {
@@ -1151,8 +1150,8 @@ impl PopRender {
                         residuum,
                         propagation_ms: r.ms,
                         iterations_run: r.iterations,
-                        error: e.mse_or_floor().sqrt(),
-                        below_floor: e.rel_rmse.is_none(),
+                        error: e.rel_or_floor(),
+                        below_floor: e.below_floor(),
                     });
                 }
             }
@@ -1163,7 +1162,7 @@ impl PopRender {
         for n in [1_000u64, 4_000, 16_000, 64_000] {
             let r = fig12::reference_fluence(g, 16, n, 7);
             let e = fig12::slice_error(&r, &reference, 16).map_err(fail)?;
-            mc_points.push((r.ms, e.mse_or_floor().sqrt(), e.rel_rmse.is_none()));
+            mc_points.push((r.ms, e.rel_or_floor(), e.below_floor()));
         }
         std::fs::create_dir_all(report_dir).map_err(|e| out(report_dir, e.to_string()))?;
         let mut series = Vec::new();

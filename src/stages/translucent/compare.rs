@@ -160,16 +160,14 @@ pub fn compare(frame: &Frame, point_ms: f64, reference: &ReferenceImage, referen
         mse(&frame.rest, &c[0], mask, scale),
     ];
     let samples = (reference.paths / (reference.width * reference.height).max(1) as u64).max(1) as u32;
-    let pick =
-        |img: &[[f64; 3]]| -> Vec<[f64; 3]> { img.iter().zip(mask).filter(|(_, m)| **m).map(|(p, _)| *p).collect() };
     let (total, ref_total) = (frame.total(), reference.total());
-    let error = NoiseCorrected::of_rgb(&pick(&total), &pick(&ref_total), &pick(&reference.variance)).ok();
+    let error = NoiseCorrected::of_rgb_masked(&total, &ref_total, &reference.variance, mask).ok();
     let (ba, br, bv) = block_means(&total, &ref_total, &reference.variance, mask, reference.width);
     let block_error = NoiseCorrected::of_rgb(&ba, &br, &bv).ok();
     // Per-path variance v₁ = noise · n; paths needed for MSE e: v₁/e, with e no smaller than the floor's
     // square (below it only a lower bound is claimed).
     let per_path = ref_noise * samples as f64;
-    let lower_bound = error.is_none_or(|e| e.rel_rmse.is_none());
+    let lower_bound = error.is_none_or(|e| e.below_floor());
     let target = match error {
         Some(e) if lower_bound => e.floor * e.floor,
         _ => corrected,

@@ -659,16 +659,13 @@ impl TranslucentRender {
                 &ReferenceOptions { samples: converged, seed: 0x7e57, ..ReferenceOptions::default() },
                 &|_| {},
             );
-            let pick = |img: &[[f64; 3]]| -> Vec<[f64; 3]> {
-                img.iter().zip(&truth.object).filter(|(_, m)| **m).map(|(p, _)| *p).collect()
-            };
-            let (truth_total, truth_var) = (pick(&truth.total()), pick(&truth.variance));
+            let truth_total = truth.total();
             // Normalised MSE with the reference's noise removed, the floor's square when below it, and
             // whether it is.
             let err = |img: &[[f64; 3]]| -> Result<(f64, bool), StageError> {
-                let e = NoiseCorrected::of_rgb(&pick(img), &truth_total, &truth_var)
+                let e = NoiseCorrected::of_rgb_masked(img, &truth_total, &truth.variance, &truth.object)
                     .map_err(|e| fail(format!("the {converged}-path reference cannot judge: {e}")))?;
-                Ok((e.mse_or_floor(), e.rel_rmse.is_none()))
+                Ok((e.mse_or_floor(), e.below_floor()))
             };
             let mut curves = Vec::new();
             let mut pts = Vec::new();
