@@ -294,6 +294,20 @@ fn ids_spelled_as_options_keep_their_location() {
     }
 }
 
+/// Found by the long fuzz run (fuzz/artifacts/pipeline/crash-dbfd1355…, after 1.09 M executions): RON
+/// skips a vertical tab (and U+0085, U+200E/F, U+2028/9) as white space, the locator did not, so the
+/// dangling-preset error of `id:\x0B"hg"` had neither file nor location.
+#[test]
+fn ids_after_ron_only_white_space_keep_their_location() {
+    let d = tempdir();
+    for ws in ["\x0B", "\r\x0B\r", "\u{85}", "\u{200E}", "\u{200F}", "\u{2028}", "\u{2029}"] {
+        let body = format!("(tables: [\n  PhaseHg(id:{ws}\"hg\", preset:{ws}\"nope\"),\n])");
+        let e = check_text(d.path(), &body).expect_err("dangling preset");
+        let s = e.to_string();
+        assert!(s.contains("preset \"nope\", which is not defined") && s.contains("p.ron:2:"), "{ws:?}: {s}");
+    }
+}
+
 /// Found by fuzzing (fuzz/artifacts/usd/timeout-ccdad09f…): a mutated fog_room.usda on which openusd
 /// does not finish; the guarded child is stopped at the limit and the error names the file.
 #[test]

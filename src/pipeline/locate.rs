@@ -69,6 +69,11 @@ impl Masked {
                         i += 1;
                     }
                 }
+            } else if let Some(n) = ron_only_whitespace(&b[i..]) {
+                // White space to RON but not to `u8::is_ascii_whitespace` (vertical tab, NEL, the
+                // direction marks and line/paragraph separators): blanked so `id:\x0B"x"` is found.
+                m[i..i + n].fill(b' ');
+                i += n;
             } else {
                 i += 1;
             }
@@ -316,6 +321,18 @@ fn is_ident(c: Option<u8>) -> bool {
 
 fn ident_boundary(b: &[u8], p: usize) -> bool {
     p == 0 || !is_ident(b.get(p - 1).copied())
+}
+
+/// Byte length of a character at the start of `b` that RON's parser skips as white space but
+/// `u8::is_ascii_whitespace` does not (ron's `is_whitespace_char`: `\x0B`, U+0085, U+200E, U+200F,
+/// U+2028, U+2029), or `None`.
+fn ron_only_whitespace(b: &[u8]) -> Option<usize> {
+    match b {
+        [0x0B, ..] => Some(1),
+        [0xC2, 0x85, ..] => Some(2),
+        [0xE2, 0x80, 0x8E | 0x8F | 0xA8 | 0xA9, ..] => Some(3),
+        _ => None,
+    }
 }
 
 fn trim_back(b: &[u8]) -> &[u8] {
