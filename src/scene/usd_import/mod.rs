@@ -193,11 +193,12 @@ fn import_stage(path: &Path) -> Result<Scene, SceneError> {
         return Err(SceneError::file(path, "the path is not valid UTF-8", "rename the file or a parent folder"));
     };
     let stage = Stage::open(path_str).map_err(|e| {
-        SceneError::file(
-            path,
-            format!("cannot open the USD layer: {e:#}"),
-            "check that the file is a valid .usda/.usdc/.usdz (e.g. open it with usd-core's usdcat)",
-        )
+        let message = format!("cannot open the USD layer: {e:#}");
+        let help = "check that the file is a valid .usda/.usdc/.usdz (e.g. open it with usd-core's usdcat)";
+        match text_parse_location(path) {
+            Some(at) => SceneError::at(path, at, message, help),
+            None => SceneError::file(path, message, help),
+        }
     })?;
     let mut imp = Importer {
         file: path,
@@ -213,6 +214,23 @@ fn import_stage(path: &Path) -> Result<Scene, SceneError> {
     imp.traverse()?;
     imp.finish();
     Ok(imp.scene)
+}
+
+/// Where a text layer stops parsing ("line L, column C"), for an error from `Stage::open`, whose
+/// own message has no position. `None` for binary layers, unreadable files and layers that parse
+/// (the error was elsewhere: a sublayer, a reference, composition).
+fn text_parse_location(path: &Path) -> Option<String> {
+    let bytes = crate::cache::bounded::read_regular(path, crate::cache::bounded::max_input_bytes()).ok()?;
+    if bytes.starts_with(b"PXR-USDC") || bytes.starts_with(b"PK") {
+        return None;
+    }
+    let text = String::from_utf8(bytes).ok()?;
+    let mut parser = openusd::usda::parser::Parser::new(&text);
+    if parser.parse().is_ok() {
+        return None;
+    }
+    let at = parser.last_error_highlight()?;
+    Some(format!("line {}, column {}", at.line, at.column))
 }
 
 impl Importer<'_> {
