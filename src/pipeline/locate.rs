@@ -306,13 +306,40 @@ fn unescape(b: &[u8]) -> (usize, String) {
                 .and_then(char::from_u32);
             ch.map_or((1, "u".into()), |ch| (5, ch.to_string()))
         }
-        Some(b'x') if b.len() >= 3 => {
-            let ch = std::str::from_utf8(&b[1..3]).ok().and_then(|h| u8::from_str_radix(h, 16).ok());
-            ch.map_or((1, "x".into()), |c| (3, char::from(c).to_string()))
+        // A line continuation: `\` at the end of a line skips the line break and the white space
+        // after it (ron's `consume_string_continuation`).
+        Some(b'\n') => (continuation(b, 1), String::new()),
+        Some(b'\r') if b.get(1) == Some(&b'\n') => (continuation(b, 2), String::new()),
+        // `\xHH`: an ASCII byte, or the first of up to four `\xHH` that spell one UTF-8 character.
+        Some(b'x') => {
+            let byte = |at: usize| {
+                let hex = std::str::from_utf8(b.get(at + 1..at + 3)?).ok()?;
+                u8::from_str_radix(hex, 16).ok()
+            };
+            let mut bytes = Vec::with_capacity(4);
+            let mut len = 0;
+            while let Some(c) = byte(len) {
+                bytes.push(c);
+                len += 3;
+                if let Ok(ch) = std::str::from_utf8(&bytes) {
+                    return (len, ch.to_owned());
+                }
+                if bytes.len() == 4 || b.get(len..len + 2) != Some(b"\\x") {
+                    break;
+                }
+                len += 1;
+            }
+            (1, "x".into())
         }
         Some(&c) if c.is_ascii() => simple(char::from(c)),
         Some(_) | None => (0, String::new()),
     }
+}
+
+/// Bytes consumed by a line continuation whose line break is `b[..n]`: the break and the spaces,
+/// tabs and line breaks after it.
+fn continuation(b: &[u8], n: usize) -> usize {
+    n + b[n..].iter().take_while(|c| matches!(c, b' ' | b'\t' | b'\n' | b'\r')).count()
 }
 
 fn is_ident(c: Option<u8>) -> bool {
@@ -368,6 +395,26 @@ mod tests {
         assert_eq!(m.find_key_string("id", "a", 0).map(|o| m.line_col(o)), Some((1, 13)));
         assert_eq!(m.find_key_string("id", "b", 0).map(|o| m.line_col(o)), Some((1, 31)));
         assert_eq!(m.find_key_string("id", "c", 0), None);
+    }
+
+    /// Found by the long fuzz run (fuzz/artifacts/pipeline/crash-3869b6f7…): a `\` at the end of a
+    /// line continues the string without the break and the indentation, and `\xC3\xA9` is one
+    /// character (é), as RON decodes them; the locator kept the break and read two Latin-1 letters.
+    #[test]
+    fn escapes_decode_as_ron_decodes_them() {
+        #[derive(serde::Deserialize)]
+        struct T {
+            a: String,
+            b: String,
+            c: String,
+        }
+        let src = "(a: \"ab\\\n   \n\tcd\", b: \"ab\\\r\n  cd\", c: \"caf\\xC3\\xA9\\x21\")";
+        let t: T = ron::from_str(src).expect("RON decodes it");
+        assert_eq!((t.a.as_str(), t.b.as_str(), t.c.as_str()), ("abcd", "abcd", "café!"));
+        let m = Masked::new(src);
+        assert_eq!(m.find_key_string("a", &t.a, 0), Some(1));
+        assert_eq!(m.find_key_string("b", &t.b, 0), src.find("b:"));
+        assert_eq!(m.find_key_string("c", &t.c, 0), src.find("c:"));
     }
 
     #[test]
