@@ -372,6 +372,43 @@ pub(crate) fn parse_preamble(bytes: &[u8]) -> Result<Preamble, ContainerError> {
     Ok(Preamble { version: found, meta_len, meta_crc })
 }
 
+/// The metadata block as a bincode reader that knows how far decoding got, so that a decode
+/// failure names its byte.
+struct TrackedSlice<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl bincode::de::read::Reader for TrackedSlice<'_> {
+    fn read(&mut self, out: &mut [u8]) -> Result<(), bincode::error::DecodeError> {
+        let Some(src) = self.at.checked_add(out.len()).and_then(|end| self.bytes.get(self.at..end)) else {
+            let additional = self.at.saturating_add(out.len()) - self.bytes.len();
+            self.at = self.bytes.len();
+            return Err(bincode::error::DecodeError::UnexpectedEnd { additional });
+        };
+        out.copy_from_slice(src);
+        self.at += out.len();
+        Ok(())
+    }
+}
+
+/// A bincode decode failure in words, at file byte `PREAMBLE_LEN + at` (bincode's own `Display`
+/// is its `Debug`).
+fn decode_failure(e: &bincode::error::DecodeError, at: usize) -> String {
+    use bincode::error::DecodeError as D;
+    let what = match e {
+        D::UnexpectedEnd { additional } => format!("the metadata ends {additional} bytes early"),
+        D::LimitExceeded => format!("a declared length exceeds the {MAX_META_LEN}-byte metadata limit"),
+        D::Utf8 { .. } => "a name or text field is not valid UTF-8".to_owned(),
+        D::UnexpectedVariant { type_name, found, .. } => format!("tag {found} is not a valid `{type_name}`"),
+        D::InvalidBooleanValue(v) => format!("{v} is not a boolean (0 or 1)"),
+        D::InvalidCharEncoding(_) => "a character is not valid UTF-8".to_owned(),
+        D::OtherString(m) => m.clone(),
+        other => format!("{other:?}"),
+    };
+    format!("at byte {} (metadata byte {at}): {what}", PREAMBLE_LEN as usize + at)
+}
+
 /// Checks the meta checksum, decodes `(Header, Vec<ChunkEntry>)` and validates both.
 /// Returns the header, the chunk index and the payload length.
 pub(crate) fn decode_meta(pre: &Preamble, meta: &[u8]) -> Result<(Header, Vec<ChunkEntry>, u64), ContainerError> {
@@ -379,11 +416,16 @@ pub(crate) fn decode_meta(pre: &Preamble, meta: &[u8]) -> Result<(Header, Vec<Ch
     if computed != pre.meta_crc {
         return Err(ContainerError::HeaderChecksum { stored: pre.meta_crc, computed });
     }
-    let ((header, chunks), used): ((Header, Vec<ChunkEntry>), usize) =
-        bincode::serde::decode_from_slice(meta, bincode_decode_config())
-            .map_err(|e| ContainerError::HeaderDecode(e.to_string()))?;
-    if used != meta.len() {
-        return Err(ContainerError::HeaderDecode(format!("{} unused bytes after the header", meta.len() - used)));
+    let mut reader = TrackedSlice { bytes: meta, at: 0 };
+    let (header, chunks): (Header, Vec<ChunkEntry>) =
+        bincode::serde::decode_from_reader(&mut reader, bincode_decode_config())
+            .map_err(|e| ContainerError::HeaderDecode(decode_failure(&e, reader.at)))?;
+    if reader.at != meta.len() {
+        return Err(ContainerError::HeaderDecode(format!(
+            "{} unused bytes after the header, from byte {}",
+            meta.len() - reader.at,
+            PREAMBLE_LEN as usize + reader.at
+        )));
     }
     validate_header(&header)?;
     let payload_len = validate_index(&header, &chunks)?;

@@ -109,7 +109,18 @@ fn forged_files_with_valid_checksums_are_rejected() {
     let mut forged = super::format::encode_preamble(&padded);
     forged.extend_from_slice(&padded);
     forged.extend_from_slice(&f.split_off(24 + meta_len as usize));
-    assert!(matches!(VtabReader::from_bytes(forged), Err(ContainerError::HeaderDecode(_))));
+    // The message names the first unused byte: right after the `meta_len` decoded ones.
+    let e = VtabReader::from_bytes(forged).err().map(|e| e.to_string());
+    let expected = format!("1 unused bytes after the header, from byte {}", 24 + meta_len);
+    assert!(e.as_deref().is_some_and(|m| m.ends_with(&expected)), "{e:?}");
+    // Meta bytes cut short (checksum recomputed): the failure names where decoding stopped, the
+    // end of the shortened block, and says so in words instead of bincode's `Debug`.
+    let cut = &meta[..meta.len() - 3];
+    let mut short = super::format::encode_preamble(cut);
+    short.extend_from_slice(cut);
+    let e = VtabReader::from_bytes(short).err().map(|e| e.to_string()).unwrap_or_default();
+    let stop = format!("at byte {} (metadata byte {}): the metadata ends", 24 + cut.len(), cut.len());
+    assert!(e.starts_with("corrupt .vtab header: ") && e.contains(&stop), "{e}");
 }
 
 /// Random corruptions of the meta block with a recomputed checksum reach
