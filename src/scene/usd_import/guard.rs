@@ -26,8 +26,9 @@ use crate::scene::{Scene, SceneError};
 /// The hidden first argument that makes `voltab` act as the import child.
 pub const CHILD_ARG: &str = "__usd-import-child";
 
-/// Stack of the child's import thread: deep but finite recursion in the parser fits.
-const CHILD_STACK: usize = 512 << 20;
+/// Stack of the child's import thread: deep but finite recursion in the parser fits. Public so
+/// that the fuzz target imports on the same stack as the child does.
+pub const CHILD_STACK: usize = 512 << 20;
 
 /// What the child sends back.
 #[derive(Serialize, Deserialize)]

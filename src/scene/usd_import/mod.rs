@@ -217,20 +217,39 @@ fn import_stage(path: &Path) -> Result<Scene, SceneError> {
 }
 
 /// Where a text layer stops parsing ("line L, column C"), for an error from `Stage::open`, whose
-/// own message has no position. `None` for binary layers, unreadable files and layers that parse
-/// (the error was elsewhere: a sublayer, a reference, composition).
+/// own message has no position. A layer is text when openusd reads it as text: a `.usda`, or a
+/// `.usd` that does not start with a binary magic. Before the first token (an empty file, a
+/// missing `#usda` magic) that is line 1, column 1; in a file that is not UTF-8, the first bad
+/// byte. `None` for binary layers, unreadable files and layers that parse (the error was
+/// elsewhere: a sublayer, a reference, composition).
 fn text_parse_location(path: &Path) -> Option<String> {
-    let bytes = crate::cache::bounded::read_regular(path, crate::cache::bounded::max_input_bytes()).ok()?;
-    if bytes.starts_with(b"PXR-USDC") || bytes.starts_with(b"PK") {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("usda" | "usd")) {
         return None;
     }
-    let text = String::from_utf8(bytes).ok()?;
+    let bytes = crate::cache::bounded::read_regular(path, crate::cache::bounded::max_input_bytes()).ok()?;
+    if ext.as_deref() == Some("usd") && (bytes.starts_with(b"PXR-USDC") || bytes.starts_with(b"PK")) {
+        return None;
+    }
+    let text = match String::from_utf8(bytes) {
+        Ok(text) => text,
+        Err(e) => {
+            let good = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+            // Valid UTF-8 up to here, so the line and column count characters.
+            let good = std::str::from_utf8(good).ok()?;
+            let line = good.matches('\n').count() + 1;
+            let column = good.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            return Some(format!("line {line}, column {column} (byte {}: not UTF-8)", good.len()));
+        }
+    };
     let mut parser = openusd::usda::parser::Parser::new(&text);
     if parser.parse().is_ok() {
         return None;
     }
-    let at = parser.last_error_highlight()?;
-    Some(format!("line {}, column {}", at.line, at.column))
+    Some(match parser.last_error_highlight() {
+        Some(at) => format!("line {}, column {}", at.line, at.column),
+        None => "line 1, column 1".to_owned(),
+    })
 }
 
 impl Importer<'_> {

@@ -82,7 +82,12 @@ impl Importer<'_> {
         let layer = self.file.display().to_string();
         let meta = |imp: &Self, key: &str| {
             imp.stage.stage_metadata(key).map_err(|e| {
-                SceneError::file(imp.file, format!("cannot read stage metadata `{key}`: {e:#}"), "re-export the layer")
+                SceneError::at(
+                    imp.file,
+                    format!("layer metadata `{key}`"),
+                    format!("cannot read it: {e:#}"),
+                    "re-export the layer",
+                )
             })
         };
         let mpu = match meta(self, "metersPerUnit")? {
@@ -100,8 +105,9 @@ impl Importer<'_> {
             Some(v) => match scalar(&v) {
                 Some(m) if m.is_finite() && m > 0.0 => m,
                 _ => {
-                    return Err(SceneError::file(
+                    return Err(SceneError::at(
                         self.file,
+                        "layer metadata `metersPerUnit`",
                         format!("metersPerUnit = {v:?} is not a positive number"),
                         "author a positive `metersPerUnit`, e.g. 1 for metres or 0.01 for centimetres",
                     ));

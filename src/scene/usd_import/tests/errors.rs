@@ -246,6 +246,18 @@ fn missing_and_unparsable_files_are_errors_naming_the_file() {
     // A text layer must open with the `#usda` magic: the parser stops at its very first character.
     let e = load_err("notusd", "this is not a USD file\n");
     assert_error(&e, "notusd", Some("line 1, column 1"), "cannot open the USD layer");
+    // An empty layer: no token was read, so the position is the start of the file.
+    let e = load_err("empty", "");
+    assert_error(&e, "empty", Some("line 1, column 1"), "cannot open the USD layer");
+    // Not UTF-8: the first bad byte, 0xFF after `#usda 1.0\nde` (10 + 2 bytes), is line 2, column 3.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("latin1.usda");
+    std::fs::write(&path, b"#usda 1.0\nde\xFFf Xform \"A\" {}\n").expect("write");
+    let e = super::import(&path).expect_err("not UTF-8");
+    assert_eq!(e.location.as_deref(), Some("line 2, column 3 (byte 12: not UTF-8)"), "{e}");
+    // A zero `metersPerUnit` is located at the layer metadata.
+    let e = load_err("zero_mpu", "#usda 1.0\n(\n    metersPerUnit = 0\n)\ndef Xform \"A\" {}\n");
+    assert_error(&e, "zero_mpu", Some("layer metadata `metersPerUnit`"), "is not a positive number");
 }
 
 /// Regression: `openusd_panics.usdc` (a usd-core `.usdc` with one byte flipped) makes openusd 0.6's
