@@ -74,6 +74,7 @@
 mod dome;
 pub mod guard;
 mod lights;
+mod locate;
 mod mesh;
 mod shade;
 mod values;
@@ -195,7 +196,7 @@ fn import_stage(path: &Path) -> Result<Scene, SceneError> {
     let stage = Stage::open(path_str).map_err(|e| {
         let message = format!("cannot open the USD layer: {e:#}");
         let help = "check that the file is a valid .usda/.usdc/.usdz (e.g. open it with usd-core's usdcat)";
-        match text_parse_location(path) {
+        match locate::layer_failure(path, &message) {
             Some(at) => SceneError::at(path, at, message, help),
             None => SceneError::file(path, message, help),
         }
@@ -214,42 +215,6 @@ fn import_stage(path: &Path) -> Result<Scene, SceneError> {
     imp.traverse()?;
     imp.finish();
     Ok(imp.scene)
-}
-
-/// Where a text layer stops parsing ("line L, column C"), for an error from `Stage::open`, whose
-/// own message has no position. A layer is text when openusd reads it as text: a `.usda`, or a
-/// `.usd` that does not start with a binary magic. Before the first token (an empty file, a
-/// missing `#usda` magic) that is line 1, column 1; in a file that is not UTF-8, the first bad
-/// byte. `None` for binary layers, unreadable files and layers that parse (the error was
-/// elsewhere: a sublayer, a reference, composition).
-fn text_parse_location(path: &Path) -> Option<String> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    if !matches!(ext.as_deref(), Some("usda" | "usd")) {
-        return None;
-    }
-    let bytes = crate::cache::bounded::read_regular(path, crate::cache::bounded::max_input_bytes()).ok()?;
-    if ext.as_deref() == Some("usd") && (bytes.starts_with(b"PXR-USDC") || bytes.starts_with(b"PK")) {
-        return None;
-    }
-    let text = match String::from_utf8(bytes) {
-        Ok(text) => text,
-        Err(e) => {
-            let good = &e.as_bytes()[..e.utf8_error().valid_up_to()];
-            // Valid UTF-8 up to here, so the line and column count characters.
-            let good = std::str::from_utf8(good).ok()?;
-            let line = good.matches('\n').count() + 1;
-            let column = good.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-            return Some(format!("line {line}, column {column} (byte {}: not UTF-8)", good.len()));
-        }
-    };
-    let mut parser = openusd::usda::parser::Parser::new(&text);
-    if parser.parse().is_ok() {
-        return None;
-    }
-    Some(match parser.last_error_highlight() {
-        Some(at) => format!("line {}, column {}", at.line, at.column),
-        None => "line 1, column 1".to_owned(),
-    })
 }
 
 impl Importer<'_> {

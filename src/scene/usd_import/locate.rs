@@ -1,0 +1,156 @@
+//! Where a layer that openusd cannot open goes wrong: a layer path and openusd's error (which
+//! carries no position) → "line L, column C" in a text layer, or the byte range of the part of a
+//! binary crate file (`.usdc`) that is broken. Used only on failure, in the guarded child like the
+//! first parse (issue 37: every error names the file and a location).
+//!
+//! Crate layout, as openusd 0.6 reads it (`usdc/reader.rs`): a 32-byte bootstrap (magic
+//! `PXR-USDC`, version bytes major/minor/patch, table-of-contents offset as a little-endian u64,
+//! 8 reserved bytes); at that offset the TOC: a u64 section count (1..64) and per section a
+//! 16-byte NUL-padded name, a u64 start and a u64 size.
+
+use std::path::Path;
+
+/// The location of the failure to open the layer at `path`, whose openusd error text is
+/// `message`; `None` when the file cannot be read again or the failure has no place in it.
+pub(super) fn layer_failure(path: &Path, message: &str) -> Option<String> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let bytes = crate::cache::bounded::read_regular(path, crate::cache::bounded::max_input_bytes()).ok()?;
+    let crate_file = bytes.starts_with(b"PXR-USDC");
+    match ext.as_deref() {
+        Some("usda") => text_failure(bytes),
+        Some("usd") if !crate_file && !bytes.starts_with(b"PK") => text_failure(bytes),
+        Some("usdc" | "usd") => crate_failure(&bytes, message),
+        _ => None,
+    }
+}
+
+/// Where a text layer stops parsing. Before the first token (an empty file, a missing `#usda`
+/// magic) that is line 1, column 1; in a file that is not UTF-8, its first bad byte. `None` when
+/// the layer parses (the error was elsewhere: a sublayer, a reference, composition).
+fn text_failure(bytes: Vec<u8>) -> Option<String> {
+    let text = match String::from_utf8(bytes) {
+        Ok(text) => text,
+        Err(e) => {
+            let good = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+            // Valid UTF-8 up to here, so the line and column count characters.
+            let good = std::str::from_utf8(good).ok()?;
+            let line = good.matches('\n').count() + 1;
+            let column = good.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            return Some(format!("line {line}, column {column} (byte {}: not UTF-8)", good.len()));
+        }
+    };
+    let mut parser = openusd::usda::parser::Parser::new(&text);
+    if parser.parse().is_ok() {
+        return None;
+    }
+    Some(match parser.last_error_highlight() {
+        Some(at) => format!("line {}, column {}", at.line, at.column),
+        None => "line 1, column 1".to_owned(),
+    })
+}
+
+/// Length of the crate bootstrap openusd reads.
+const BOOTSTRAP: u64 = 32;
+/// Length of one TOC entry: name[16], start, size.
+const SECTION: u64 = 32;
+
+/// The first part of a crate file that breaks its layout, or the section openusd's `message`
+/// names when the layout holds and the failure is inside a section's data.
+fn crate_failure(b: &[u8], message: &str) -> Option<String> {
+    let len = b.len() as u64;
+    if len < BOOTSTRAP {
+        return Some(format!("bytes 0–{BOOTSTRAP} (crate bootstrap; the file has {len})"));
+    }
+    if !b.starts_with(b"PXR-USDC") {
+        return Some("bytes 0–8 (crate magic)".to_owned());
+    }
+    if message.contains("version") {
+        return Some(format!("bytes 8–11 (crate version {}.{}.{})", b[8], b[9], b[10]));
+    }
+    let u64_at = |at: u64| -> Option<u64> {
+        let at = usize::try_from(at).ok()?;
+        let w = b.get(at..at.checked_add(8)?)?;
+        Some(u64::from_le_bytes(w.try_into().ok()?))
+    };
+    let toc = u64_at(16)?;
+    if toc == 0 {
+        return Some("bytes 16–24 (TOC offset 0)".to_owned());
+    }
+    let Some(count) = u64_at(toc) else {
+        return Some(format!("bytes 16–24 (TOC offset {toc}, past the end of the {len}-byte file)"));
+    };
+    let toc_end = (toc + 8).saturating_add(count.saturating_mul(SECTION));
+    if count == 0 || count >= 64 || toc_end > len {
+        return Some(format!("bytes {toc}–{} (TOC of {count} sections)", toc_end.min(len)));
+    }
+    let mut named = None;
+    for k in 0..count {
+        let at = toc + 8 + k * SECTION;
+        let name = &b[at as usize..(at + 16) as usize];
+        let name = String::from_utf8_lossy(name.split(|&c| c == 0).next().unwrap_or(name)).into_owned();
+        let (start, size) = (u64_at(at + 16)?, u64_at(at + 24)?);
+        let end = start.saturating_add(size);
+        if end > len {
+            return Some(format!(
+                "bytes {at}–{} (TOC entry of section `{name}`: {start}–{end}, past the end)",
+                at + SECTION
+            ));
+        }
+        if named.is_none() && !name.is_empty() && message.to_ascii_uppercase().contains(&name) {
+            named = Some(format!("bytes {start}–{end} (section `{name}`)"));
+        }
+    }
+    named
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A crate file with the given TOC offset and sections `(name, start, size)`, padded to `len`.
+    fn crate_bytes(toc: u64, sections: &[(&str, u64, u64)], len: usize) -> Vec<u8> {
+        let mut b = b"PXR-USDC".to_vec();
+        b.extend_from_slice(&[0, 8, 0, 0, 0, 0, 0, 0]);
+        b.extend_from_slice(&toc.to_le_bytes());
+        b.resize(len, 0);
+        let t = toc as usize;
+        if t >= 32 && t + 8 <= len {
+            b[t..t + 8].copy_from_slice(&(sections.len() as u64).to_le_bytes());
+            for (k, (name, start, size)) in sections.iter().enumerate() {
+                let at = t + 8 + k * 32;
+                if at + 32 > len {
+                    break;
+                }
+                b[at..at + name.len()].copy_from_slice(name.as_bytes());
+                b[at + 16..at + 24].copy_from_slice(&start.to_le_bytes());
+                b[at + 24..at + 32].copy_from_slice(&size.to_le_bytes());
+            }
+        }
+        b
+    }
+
+    #[test]
+    fn crate_failures_name_the_broken_part() {
+        let at = |b: &[u8], m: &str| crate_failure(b, m);
+        assert_eq!(at(b"PXR-USDC", "x").as_deref(), Some("bytes 0–32 (crate bootstrap; the file has 8)"));
+        let mut bad_magic = crate_bytes(40, &[], 100);
+        bad_magic[3] = b'?';
+        assert_eq!(at(&bad_magic, "x").as_deref(), Some("bytes 0–8 (crate magic)"));
+        let good = crate_bytes(100, &[("TOKENS", 32, 40), ("PATHS", 72, 20)], 200);
+        assert_eq!(at(&good, "Usd crate version mismatch").as_deref(), Some("bytes 8–11 (crate version 0.8.0)"));
+        assert_eq!(
+            at(&crate_bytes(500, &[], 200), "Invalid TOC offset").as_deref(),
+            Some("bytes 16–24 (TOC offset 500, past the end of the 200-byte file)")
+        );
+        assert_eq!(at(&crate_bytes(0, &[], 200), "x").as_deref(), Some("bytes 16–24 (TOC offset 0)"));
+        assert_eq!(at(&crate_bytes(100, &[], 200), "x").as_deref(), Some("bytes 100–108 (TOC of 0 sections)"));
+        let past = crate_bytes(100, &[("TOKENS", 32, 40), ("PATHS", 72, 500)], 200);
+        assert_eq!(
+            at(&past, "x").as_deref(),
+            Some("bytes 140–172 (TOC entry of section `PATHS`: 72–572, past the end)")
+        );
+        // Layout intact: the section openusd's message names, else no location.
+        assert_eq!(at(&good, "Failed to parse TOKENS section").as_deref(), Some("bytes 32–72 (section `TOKENS`)"));
+        assert_eq!(at(&good, "Unable to read pod").as_deref(), None);
+    }
+}
