@@ -25,7 +25,8 @@ fi
 
 seeds=seeds/$target
 rm -rf "$seeds"
-mkdir -p "$seeds" "corpus/$target" "artifacts/$target"
+mkdir -p "$seeds" "corpus/$target" "artifacts/$target" mem
+rm -f "mem/$target.txt"
 case $target in
   pipeline) cp ../pipelines/*.ron ../tables/golden/golden.ron "$seeds"/ ;;
   vtab) cp ../tables/golden/*.vtab "$seeds"/ ;;

@@ -1,11 +1,18 @@
 //! Pipeline front end from memory: RON text → load (parse, includes) → validate. Any outcome but a
-//! panic, abort or hang is fine; every diagnostic must carry the file name.
+//! panic, abort or hang is fine; every diagnostic must name the file and carry a location
+//! (`file:line:column`), and the heap may grow by at most 4× the text's size.
 #![no_main]
+
+#[path = "common/mem.rs"]
+mod mem;
 
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
 use voltab::pipeline::{Limits, Sources, parse::load, validate};
+
+#[global_allocator]
+static ALLOC: mem::Counting = mem::Counting;
 
 /// One in-memory file; includes of anything else are "not found".
 struct Mem<'a>(&'a str);
@@ -22,6 +29,7 @@ impl Sources for Mem<'_> {
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else { return };
+    let window = mem::start();
     let path = Path::new("fuzz.ron");
     let limits = Limits { memory_bytes: 1 << 30 };
     let result = load(path, &Mem(text)).and_then(|l| validate(path, l, &limits));
@@ -29,6 +37,8 @@ fuzz_target!(|data: &[u8]| {
         for d in &e.diagnostics {
             let shown = d.to_string();
             assert!(shown.contains("fuzz.ron"), "a diagnostic lost its file: {shown}");
+            assert!(d.loc.is_some(), "a diagnostic has no location: {shown}");
         }
     }
+    window.check("pipeline", data.len() as u64);
 });

@@ -1,7 +1,11 @@
 //! Table look-ups from bytes: the first byte picks ZhResponse or MsLobes, the rest is a `.vtab`
 //! opened as that kind (stored-definition validation, layout checks), then queried at a few points
-//! in and out of range. Errors are fine; panics are not.
+//! in and out of range. Errors are fine; panics are not, nor a heap growing beyond 4× the declared
+//! data (the input plus every chunk's declared raw size).
 #![no_main]
+
+#[path = "common/mem.rs"]
+mod mem;
 
 use std::path::Path;
 
@@ -10,10 +14,21 @@ use voltab::container::{ReadLimits, VtabReader};
 use voltab::tables::ms_lobes::{LobeQuery, MsLobesTable};
 use voltab::tables::zh_response::{Emitter, Medium, QueryOptions, Receiver, ZhResponseTable};
 
+#[global_allocator]
+static ALLOC: mem::Counting = mem::Counting;
+
 fuzz_target!(|data: &[u8]| {
+    let window = mem::start();
+    let mut declared = data.len() as u64;
+    look_up(data, &mut declared);
+    window.check("table_lookup", declared);
+});
+
+fn look_up(data: &[u8], declared: &mut u64) {
     let Some((&which, bytes)) = data.split_first() else { return };
     let limits = ReadLimits { max_chunk_bytes: 16 << 20 };
     let Ok(r) = VtabReader::from_bytes_with_limits(bytes.to_vec(), limits) else { return };
+    *declared = declared.saturating_add(r.chunks().iter().fold(0u64, |s, c| s.saturating_add(c.raw_len)));
     let name = Path::new("fuzz.vtab");
     if which % 2 == 0 {
         let Ok(t) = ZhResponseTable::from_reader(r, name, None, None) else { return };
@@ -41,4 +56,4 @@ fuzz_target!(|data: &[u8]| {
             let _ = t.density(albedo, g, rho, z);
         }
     }
-});
+}

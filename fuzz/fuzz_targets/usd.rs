@@ -1,9 +1,16 @@
 //! USD importer from bytes: the input is written to a `.usda` (or, when it starts with the crate
 //! magic `PXR-USDC`, a `.usdc`) file and imported in this process (the guarded child is what
 //! contains openusd's own hangs in `voltab`; here they show up as libFuzzer timeouts), then checked.
+//! The heap may grow by at most 4× the input's size.
 #![no_main]
 
+#[path = "common/mem.rs"]
+mod mem;
+
 use libfuzzer_sys::fuzz_target;
+
+#[global_allocator]
+static ALLOC: mem::Counting = mem::Counting;
 
 fuzz_target!(|data: &[u8]| {
     let ext = if data.starts_with(b"PXR-USDC") { "usdc" } else { "usda" };
@@ -12,7 +19,21 @@ fuzz_target!(|data: &[u8]| {
     if std::fs::write(&path, data).is_err() {
         return;
     }
-    if let Ok(mut scene) = voltab::scene::usd_import::import_in_process(&path) {
-        let _ = voltab::scene::check::check(&mut scene);
+    let window = mem::start();
+    // On a thread with the guarded child's stack, as `voltab` imports: libFuzzer's main thread has
+    // 8 MiB, where openusd's recursive-descent parser overflows on deep nesting that the child's
+    // stack holds (an overflow is uncatchable: it ended a fork-mode run with no artifact).
+    let import =
+        std::thread::Builder::new().stack_size(voltab::scene::usd_import::guard::CHILD_STACK).spawn(move || {
+            if let Ok(mut scene) = voltab::scene::usd_import::import_in_process(&path) {
+                let _ = voltab::scene::check::check(&mut scene);
+            }
+            drop(dir);
+        });
+    if let Ok(handle) = import {
+        if let Err(panic) = handle.join() {
+            std::panic::resume_unwind(panic);
+        }
     }
+    window.check("usd", data.len() as u64);
 });
