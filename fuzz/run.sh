@@ -41,7 +41,7 @@ esac
 RUSTFLAGS="${RUSTFLAGS:-} --cfg fuzzing -Cpasses=sancov-module -Cllvm-args=-sanitizer-coverage-level=4 \
   -Cllvm-args=-sanitizer-coverage-inline-8bit-counters -Cllvm-args=-sanitizer-coverage-pc-table \
   -Cllvm-args=-sanitizer-coverage-trace-compares -Cdebug-assertions -Coverflow-checks" \
-  cargo build --release --target "$triple" --bin "$target"
+  cargo build --release --locked --target "$triple" --bin "$target"
 
 # openusd's own hangs (e.g. a relationship path missing its '>') are contained in voltab by the
 # guarded child process, not in the library: for the usd target, keep fuzzing past timeouts (each is

@@ -66,7 +66,8 @@
 //! `Path::parent`), overflow its stack (instancing) or request an impossible allocation (array
 //! lengths of a corrupt `.usdc`): the `voltab` binary therefore parses every layer in a guarded
 //! child process ([`guard`]: time limit, memory limit, large stack), so those become errors naming
-//! the file.
+//! the file. A layer openusd cannot open is located by `locate`: line and column in a text layer,
+//! the broken part's byte range in a crate file.
 //!
 //! openusd's `Stage` is not `Send`; everything is converted on the calling thread into voltab's
 //! own structs.
