@@ -121,6 +121,15 @@ fn forged_files_with_valid_checksums_are_rejected() {
     let e = VtabReader::from_bytes(short).err().map(|e| e.to_string()).unwrap_or_default();
     let stop = format!("at byte {} (metadata byte {}): the metadata ends", 24 + cut.len(), cut.len());
     assert!(e.starts_with("corrupt .vtab header: ") && e.contains(&stop), "{e}");
+    // A string that claims 6 MB in a block of a few hundred bytes (found by the vtab fuzz target's
+    // heap check: 6.7 MB allocated for a 2 KB file) is refused when claimed, before bincode
+    // allocates it, not when its bytes run out after the allocation ("the metadata ends … early").
+    let mut claims = meta.clone();
+    claims[..8].copy_from_slice(&6_000_000u64.to_le_bytes()); // the length of `Header::kind`
+    let mut forged = super::format::encode_preamble(&claims);
+    forged.extend_from_slice(&claims);
+    let e = VtabReader::from_bytes(forged).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(e.ends_with("(metadata byte 8): a declared length runs past the end of the metadata"), "{e}");
 }
 
 /// Random corruptions of the meta block with a recomputed checksum reach
