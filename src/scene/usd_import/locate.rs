@@ -1,7 +1,9 @@
 //! Where a layer that openusd cannot open goes wrong: a layer path and openusd's error (which
 //! carries no position) → "line L, column C" in a text layer, or the byte range of the part of a
 //! binary crate file (`.usdc`) that is broken. Used only on failure, in the guarded child like the
-//! first parse (issue 37: every error names the file and a location).
+//! first parse (issue 37: every error names the file and a location). Before the layer is opened,
+//! a text layer's path literals are checked (`refuse_malformed_paths`): openusd can loop forever
+//! on a malformed one.
 //!
 //! Crate layout, as openusd 0.6 reads it (`usdc/reader.rs`): a 32-byte bootstrap (magic
 //! `PXR-USDC`, version bytes major/minor/patch, table-of-contents offset as a little-endian u64,
@@ -9,6 +11,8 @@
 //! 16-byte NUL-padded name, a u64 start and a u64 size.
 
 use std::path::Path;
+
+use crate::scene::SceneError;
 
 /// The location of the failure to open the layer at `path`, whose openusd error text is
 /// `message`; `None` when the file cannot be read again or the failure has no place in it.
@@ -21,6 +25,30 @@ pub(super) fn layer_failure(path: &Path, message: &str) -> Option<String> {
         Some("usd") if !crate_file && !bytes.starts_with(b"PK") => text_failure(bytes),
         Some("usdc" | "usd") => crate_failure(&bytes, message),
         _ => None,
+    }
+}
+
+/// Refuses a text layer with a malformed path literal ([`malformed_path`]) before openusd sees it.
+pub(super) fn refuse_malformed_paths(path: &Path) -> Result<(), SceneError> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("usda" | "usd")) {
+        return Ok(());
+    }
+    let Ok(bytes) = crate::cache::bounded::read_regular(path, crate::cache::bounded::max_input_bytes()) else {
+        return Ok(()); // openusd reports the unreadable file
+    };
+    let Ok(text) = std::str::from_utf8(&bytes) else { return Ok(()) };
+    if !text.starts_with("#usda") {
+        return Ok(());
+    }
+    match malformed_path(text) {
+        None => Ok(()),
+        Some((line, column, what)) => Err(SceneError::at(
+            path,
+            format!("line {line}, column {column}"),
+            format!("malformed path: {what}"),
+            "a path literal runs from `<` to the next `>`; close it (e.g. `</World/Looks/Mat>`)",
+        )),
     }
 }
 
@@ -47,6 +75,84 @@ fn text_failure(bytes: Vec<u8>) -> Option<String> {
         Some(at) => format!("line {}, column {}", at.line, at.column),
         None => "line 1, column 1".to_owned(),
     })
+}
+
+/// The first path literal `<…>` of a text layer that cannot be a path, as (line, column, what is
+/// wrong), found by scanning the tokens the way openusd's lexer does (strings, asset paths and
+/// comments skipped; a path runs from `<` to the next `>`). A path never holds white space,
+/// quotes, parentheses, commas, `<`, `@`, `#` or `;`; one that does is almost always a `>` gone
+/// missing, and openusd, handed such a path, can loop forever walking its ancestors
+/// (`Path::parent`; every USD hang the fuzzer found, 13 of 13) — so it is refused, located, before
+/// the layer is opened.
+pub(super) fn malformed_path(text: &str) -> Option<(usize, usize, String)> {
+    let b = text.as_bytes();
+    let skip_quoted = |i: usize, q: &[u8]| -> usize {
+        // A string or asset path opening at i with delimiter q: the offset after its end.
+        let mut j = i + q.len();
+        while j < b.len() {
+            if q.len() == 1 && b[j] == b'\\' && q[0] != b'@' {
+                j += 2;
+                continue;
+            }
+            if b[j..].starts_with(q) {
+                return j + q.len();
+            }
+            j += 1;
+        }
+        b.len()
+    };
+    let mut i = 0;
+    while i < b.len() {
+        let rest = &b[i..];
+        i = match rest[0] {
+            b'"' if rest.starts_with(b"\"\"\"") => skip_quoted(i, b"\"\"\""),
+            b'\'' if rest.starts_with(b"\'\'\'") => skip_quoted(i, b"\'\'\'"),
+            b'@' if rest.starts_with(b"@@@") => skip_quoted(i, b"@@@"),
+            q @ (b'"' | b'\'' | b'@') => skip_quoted(i, &[q]),
+            b'#' => i + rest.iter().position(|&c| c == b'\n' || c == b'\r').unwrap_or(rest.len()),
+            b'/' if rest.starts_with(b"/*") => {
+                i + 2 + rest[2..].windows(2).position(|w| w == b"*/").map_or(rest.len() - 2, |p| p + 2)
+            }
+            b'<' => {
+                let body = &rest[1..rest.iter().position(|&c| c == b'>').unwrap_or(rest.len())];
+                if let Some(bad) = body.iter().find(|c| b" \t\r\n\x0c\"'(),<@#;".contains(c)) {
+                    let before = &text[..i];
+                    let line = before.matches('\n').count() + 1;
+                    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+                    let shown: String = String::from_utf8_lossy(body).chars().take(48).collect();
+                    return Some((line, column, format!("{:?} in `<{}…`", char::from(*bad), shown.escape_debug())));
+                }
+                i + 2 + body.len()
+            }
+            _ => i + 1,
+        };
+    }
+    None
+}
+
+/// Whether `name` can name an attribute: identifiers joined by `:` (`xformOp:rotateXYZ:tilt`).
+/// openusd builds a property path from any string it is handed, and a name such as
+/// `xformOp:t[] x = [` gives a path whose ancestors it walks forever.
+pub(super) fn is_attribute_name(name: &str) -> bool {
+    name.split(':').all(|part| {
+        let mut c = part.chars();
+        c.next().is_some_and(|first| first == '_' || first.is_alphabetic())
+            && c.all(|ch| ch == '_' || ch.is_alphanumeric())
+    })
+}
+
+/// Whether walking `path`'s parents ends: each step must shorten it. A prim name holding a brace
+/// or bracket (only a broken layer has one) gives a path that is its own parent in openusd.
+pub(super) fn ancestry_terminates(path: &openusd::sdf::Path) -> bool {
+    let mut p = path.clone();
+    for _ in 0..=path.as_str().len() {
+        match p.parent() {
+            None => return true,
+            Some(q) if q.as_str().len() < p.as_str().len() => p = q,
+            Some(_) => return false,
+        }
+    }
+    false
 }
 
 /// Length of the crate bootstrap openusd reads.
@@ -127,6 +233,33 @@ mod tests {
             }
         }
         b
+    }
+
+    #[test]
+    fn malformed_paths_are_found_outside_strings_assets_and_comments() {
+        let ok = "#usda 1.0 <not a path in a comment>\ndef X \"A\" (doc = \"a <b c> d\" doc = \"\"\"<x\n>\"\"\")\n{\n\
+                  asset t = @tex.<UDIM>.exr@\n/* <x y> */ rel r = </A/B.c[/D].e>\n    rel v = </A{v=s}B>\n}\n";
+        assert_eq!(malformed_path(ok), None);
+        // A `>` gone missing: the path runs into the next line.
+        let missing = "#usda 1.0\ndef X \"A\" {\n    rel r = </World/Lo\"\n    rel q = </B>\n}\n";
+        let (line, column, what) = malformed_path(missing).expect("malformed");
+        assert_eq!((line, column), (3, 13), "{what}");
+        assert!(what.starts_with("'\"' in `</World/Lo"), "{what}");
+    }
+
+    #[test]
+    fn attribute_names_and_self_parented_paths() {
+        for ok in ["xformOp:translate", "xformOp:rotateXYZ:tilt", "_a:b1", "größe"] {
+            assert!(is_attribute_name(ok), "{ok}");
+        }
+        for bad in ["xformOp:ttoken[] xformOpOrder = [", "", "a::b", "1a", "xformOp:", "a b"] {
+            assert!(!is_attribute_name(bad), "{bad}");
+        }
+        let p = |s: &str| openusd::sdf::Path::new(s).expect("openusd accepts any path text");
+        assert!(ancestry_terminates(&p("/World/Looks/Mat.outputs:surface")));
+        assert!(ancestry_terminates(&p("/A{v=s}B")));
+        // Ends with `}` but has no `{`: openusd gives the path itself as its parent.
+        assert!(!ancestry_terminates(&p("/World/a}")));
     }
 
     #[test]

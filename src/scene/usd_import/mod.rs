@@ -194,6 +194,7 @@ fn import_stage(path: &Path) -> Result<Scene, SceneError> {
     let Some(path_str) = path.to_str() else {
         return Err(SceneError::file(path, "the path is not valid UTF-8", "rename the file or a parent folder"));
     };
+    locate::refuse_malformed_paths(path)?;
     let stage = Stage::open(path_str).map_err(|e| {
         let message = format!("cannot open the USD layer: {e:#}");
         let help = "check that the file is a valid .usda/.usdc/.usdz (e.g. open it with usd-core's usdcat)";
@@ -256,6 +257,13 @@ impl Importer<'_> {
         let mut nodes: HashMap<sdf::Path, Node> = HashMap::new();
         nodes.insert(sdf::Path::abs_root(), Node { world: DMat4::IDENTITY, purpose: None });
         for path in paths {
+            if !locate::ancestry_terminates(&path) {
+                return Err(self.err(
+                    &path,
+                    "the prim's name is not a valid prim name (openusd cannot walk its ancestors)".into(),
+                    "name prims with identifiers (letters, digits, '_')",
+                ));
+            }
             // A parent missing from `nodes` was skipped: so is its subtree.
             let Some(parent) = path.parent().and_then(|p| nodes.get(&p)).cloned() else { continue };
             if self.token_attr(&path, "visibility")?.as_deref() == Some("invisible") {

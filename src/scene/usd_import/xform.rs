@@ -151,6 +151,13 @@ impl Importer<'_> {
                 continue;
             }
             let name = op.strip_prefix("!invert!").unwrap_or(op);
+            if !super::locate::is_attribute_name(name) {
+                return Err(self.err(
+                    &path,
+                    format!("xformOpOrder entry {op:?} is not an attribute name"),
+                    "list xformOp attribute names such as \"xformOp:translate\" (identifiers joined by ':')",
+                ));
+            }
             let kind = name.strip_prefix("xformOp:").and_then(|k| k.split(':').next()).unwrap_or("");
             if !KNOWN_OPS.contains(&kind) && kind != "transform" {
                 self.warn(
