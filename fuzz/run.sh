@@ -45,10 +45,11 @@ RUSTFLAGS="${RUSTFLAGS:-} --cfg fuzzing -Cpasses=sancov-module -Cllvm-args=-sani
 
 # openusd's own hangs (e.g. a relationship path missing its '>') are contained in voltab by the
 # guarded child process, not in the library: for the usd target, keep fuzzing past timeouts (each is
-# still saved under artifacts/usd/ for triage) instead of stopping at the first. -handle_segv=0 leaves
-# SIGSEGV to Rust's handler, which turns a stack overflow into an abort whose input libFuzzer saves.
+# still saved under artifacts/usd/ for triage) instead of stopping at the first. A stack overflow
+# kills a child with no artifact (libFuzzer's C main skips Rust's overflow handler); the input is
+# then left in the target's temporary folder, /tmp/.tmp*/fuzz.usd*.
 extra=()
-if [ "$target" = usd ]; then extra=(-fork=1 -ignore_timeouts=1 -ignore_ooms=1 -handle_segv=0); fi
+if [ "$target" = usd ]; then extra=(-fork=1 -ignore_timeouts=1 -ignore_ooms=1); fi
 
 bin=$CARGO_TARGET_DIR/$triple/release/$target
 "$bin" "${extra[@]}" -max_total_time="$secs" -timeout=10 -rss_limit_mb=4096 -max_len=1048576 -print_final_stats=1 \
