@@ -19,7 +19,7 @@ triple=$(rustc -vV | sed -n 's/^host: //p')
 export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-$here/target}
 
 if [ "$target" = all ]; then
-  for t in pipeline vtab table_lookup gltf usd; do "$0" "$t" "$secs" "$@"; done
+  for t in pipeline vtab table_lookup gltf usd; do "$here/run.sh" "$t" "$secs" "$@"; done
   exit 0
 fi
 
