@@ -197,6 +197,7 @@ enum Command {
         tables: PathBuf,
     },
     /// Timings side by side as ratios: cold vs no-op compile, 1 vs N threads, zstd levels, ZH query throughput.
+    #[command(group(clap::ArgGroup::new("focus").args(["bake", "effects", "translucent", "pop", "gpu", "shards"])))]
     Bench {
         /// Pipeline file.
         #[arg(default_value = "pipelines/default.ron")]
@@ -1020,91 +1021,46 @@ fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
                     };
                     keep(voltab::shard::bench::bake(&p, &ctx, &stage_only, &say).map_err(|e| anyhow::anyhow!(e))?);
                 }
-            } else if gpu {
-                let (device, message) = voltab::render::gpu::select(voltab::render::gpu::DeviceRequest::Gpu)
-                    .map_err(|e| anyhow::anyhow!(e))?;
-                eprintln!("{message}");
-                if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
+            } else if gpu || bake || translucent || pop || effects {
+                // The stages' own benchmarks; effects need no tables, the others compile theirs first.
+                use voltab::stages::BenchFocus;
+                let focus = [
+                    (bake, BenchFocus::Bake),
+                    (translucent, BenchFocus::Translucent),
+                    (pop, BenchFocus::Pop),
+                    (effects, BenchFocus::Effects),
+                ]
+                .into_iter()
+                .find_map(|(on, f)| on.then_some(f));
+                let device = if gpu {
+                    let (device, message) = voltab::render::gpu::select(voltab::render::gpu::DeviceRequest::Gpu)
+                        .map_err(|e| anyhow::anyhow!(e))?;
+                    eprintln!("{message}");
+                    device
+                } else {
+                    cpu_device
+                };
+                let p =
+                    if effects { Some(load(&pipeline)?) } else { compiled_for_stages(&pipeline, &tables, progress)? };
+                if let Some(p) = p {
                     let base = base_dir(&p);
                     let ctx =
                         voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress, device: &device };
                     for s in p.stages() {
-                        if let Some((text, r)) = s.def().bench_gpu(s.id(), &ctx)? {
-                            if !json {
+                        let measured = if gpu {
+                            s.def().bench_gpu(s.id(), &ctx)?
+                        } else if focus.is_some() && s.def().bench_focus() == focus {
+                            s.def().bench(s.id(), &ctx)?
+                        } else {
+                            None
+                        };
+                        if let Some((text, r)) = measured {
+                            if !json && !text.is_empty() {
                                 println!("{text}");
                             }
                             rows.extend(r);
                         }
                     }
-                }
-            } else if bake {
-                if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
-                    let base = base_dir(&p);
-                    let ctx = voltab::stages::StageContext {
-                        out_dir: &tables,
-                        base_dir: &base,
-                        progress,
-                        device: &cpu_device,
-                    };
-                    for s in p.stages() {
-                        if let voltab::stages::StageDef::BakeLightmaps(b) = s.def() {
-                            rows.extend(b.bench(s.id(), &ctx)?);
-                        }
-                    }
-                }
-            } else if translucent {
-                if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
-                    let base = base_dir(&p);
-                    let ctx = voltab::stages::StageContext {
-                        out_dir: &tables,
-                        base_dir: &base,
-                        progress,
-                        device: &cpu_device,
-                    };
-                    for s in p.stages() {
-                        if let voltab::stages::StageDef::TranslucentRender(t) = s.def() {
-                            let (text, r) = t.bench(s.id(), &ctx)?;
-                            if !json {
-                                println!("{text}");
-                            }
-                            rows.extend(r);
-                        }
-                    }
-                }
-            } else if pop {
-                if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
-                    let base = base_dir(&p);
-                    let ctx = voltab::stages::StageContext {
-                        out_dir: &tables,
-                        base_dir: &base,
-                        progress,
-                        device: &cpu_device,
-                    };
-                    for s in p.stages() {
-                        if let voltab::stages::StageDef::PopRender(r) = s.def() {
-                            let (text, r) = r.bench(s.id(), &ctx)?;
-                            if !json {
-                                println!("{text}");
-                            }
-                            rows.extend(r);
-                        }
-                    }
-                }
-            } else if effects {
-                let p = load(&pipeline)?;
-                let base = base_dir(&p);
-                let ctx =
-                    voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress, device: &cpu_device };
-                for s in p.stages() {
-                    let (text, r) = match s.def() {
-                        voltab::stages::StageDef::EpipolarShadows(e) => e.bench(s.id(), &ctx)?,
-                        voltab::stages::StageDef::ImageFog(f) => f.bench(s.id(), &ctx)?,
-                        _ => continue,
-                    };
-                    if !json {
-                        println!("{text}");
-                    }
-                    rows.extend(r);
                 }
             } else if !rays_only {
                 let p = load(&pipeline)?;

@@ -19,6 +19,20 @@ use serde::{Deserialize, Serialize};
 
 use crate::tables::FieldIssue;
 
+/// The stages' own benchmarks, one per `voltab bench` flag (`--bake`, `--effects`, `--translucent`,
+/// `--pop`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BenchFocus {
+    /// Lightmap bakes.
+    Bake,
+    /// The real-time effects: god rays and image-space fog.
+    Effects,
+    /// Translucent media.
+    Translucent,
+    /// Principal-ordinates propagation.
+    Pop,
+}
+
 /// One measured comparison.
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchRow {
@@ -233,6 +247,31 @@ impl StageDef {
             StageDef::ImageFog(f) => f.report(id, ctx, report_dir).map(Some),
             StageDef::TranslucentRender(t) => t.report(id, ctx, report_dir).map(Some),
             StageDef::PopRender(p) => p.report(id, ctx, report_dir).map(Some),
+        }
+    }
+
+    /// The `voltab bench` focus whose run includes this stage's [`StageDef::bench`]; `None` for stages
+    /// without a benchmark.
+    pub fn bench_focus(&self) -> Option<BenchFocus> {
+        match self {
+            StageDef::PlotPhase(_) => None,
+            StageDef::BakeLightmaps(_) => Some(BenchFocus::Bake),
+            StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) => Some(BenchFocus::Effects),
+            StageDef::TranslucentRender(_) => Some(BenchFocus::Translucent),
+            StageDef::PopRender(_) => Some(BenchFocus::Pop),
+        }
+    }
+
+    /// `voltab bench --bake | --effects | --translucent | --pop`: the stage's own benchmark, its text
+    /// (empty for the bake, whose rows say it all) and rows; `None` for stages without one.
+    pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<BenchRow>)>, StageError> {
+        match self {
+            StageDef::PlotPhase(_) => Ok(None),
+            StageDef::BakeLightmaps(b) => b.bench(id, ctx).map(|rows| Some((String::new(), rows))),
+            StageDef::EpipolarShadows(e) => e.bench(id, ctx).map(Some),
+            StageDef::ImageFog(f) => f.bench(id, ctx).map(Some),
+            StageDef::TranslucentRender(t) => t.bench(id, ctx).map(Some),
+            StageDef::PopRender(p) => p.bench(id, ctx).map(Some),
         }
     }
 
