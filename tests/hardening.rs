@@ -286,13 +286,19 @@ fn a_usd_layer_that_hangs_the_parser_is_refused_at_the_broken_path() {
 /// the dangling-preset error of that table lost its file and location.
 #[test]
 fn ids_spelled_as_options_keep_their_location() {
-    let d = tempdir();
     for id in ["Some\"hg\"", "Some(\"hg\")"] {
-        let body = format!("(tables: [\n  PhaseHg(id: {id}, preset: \"nope\"),\n])");
-        let e = check_text(d.path(), &body).expect_err("dangling preset");
-        let s = e.to_string();
-        assert!(s.contains("preset \"nope\", which is not defined") && s.contains("p.ron:2:"), "{id}: {s}");
+        assert_dangling_preset_located(&format!("PhaseHg(id: {id}, preset: \"nope\")"));
     }
+}
+
+/// `table` (a table entry whose preset `"nope"` is undefined) on line 2 of a pipeline: the error names
+/// the preset, the file and line 2.
+fn assert_dangling_preset_located(table: &str) {
+    let d = tempdir();
+    let body = format!("(tables: [\n  {table},\n])");
+    let e = check_text(d.path(), &body).expect_err("dangling preset");
+    let s = e.to_string();
+    assert!(s.contains("preset \"nope\", which is not defined") && s.contains("p.ron:2:"), "{table:?}: {s}");
 }
 
 /// Found by the long fuzz run (fuzz/artifacts/pipeline/crash-dbfd1355…, after 1.09 M executions): RON
@@ -300,12 +306,8 @@ fn ids_spelled_as_options_keep_their_location() {
 /// dangling-preset error of `id:\x0B"hg"` had neither file nor location.
 #[test]
 fn ids_after_ron_only_white_space_keep_their_location() {
-    let d = tempdir();
     for ws in ["\x0B", "\r\x0B\r", "\u{85}", "\u{200E}", "\u{200F}", "\u{2028}", "\u{2029}"] {
-        let body = format!("(tables: [\n  PhaseHg(id:{ws}\"hg\", preset:{ws}\"nope\"),\n])");
-        let e = check_text(d.path(), &body).expect_err("dangling preset");
-        let s = e.to_string();
-        assert!(s.contains("preset \"nope\", which is not defined") && s.contains("p.ron:2:"), "{ws:?}: {s}");
+        assert_dangling_preset_located(&format!("PhaseHg(id:{ws}\"hg\", preset:{ws}\"nope\")"));
     }
 }
 
