@@ -6,6 +6,7 @@
 
 use std::fmt::Write as _;
 
+use glam::DVec3;
 use serde::Serialize;
 
 use super::{
@@ -106,25 +107,13 @@ pub struct SceneSummary {
     pub warnings: Vec<SceneWarning>,
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
-}
-
 /// Area \[m²\] and area-weighted centroid of a mesh.
 pub fn mesh_area(mesh: &super::Mesh) -> (f64, [f64; 3]) {
     let mut area = 0.0;
     let mut c = [0.0; 3];
     for t in &mesh.triangles {
-        let p = t.map(|i| mesh.positions[i as usize].map(f64::from));
-        let a = 0.5 * norm(cross(sub(p[1], p[0]), sub(p[2], p[0])));
+        let p = t.map(|i| DVec3::from(mesh.positions[i as usize].map(f64::from)));
+        let a = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
         area += a;
         for k in 0..3 {
             c[k] += a * (p[0][k] + p[1][k] + p[2][k]) / 3.0;
@@ -141,7 +130,9 @@ pub fn light_area(scene: &Scene, kind: &LightKind) -> Option<f64> {
     use std::f64::consts::PI;
     match kind {
         LightKind::Point { .. } | LightKind::Spot { .. } | LightKind::Directional { .. } => None,
-        LightKind::Rect { half_u, half_v, .. } => Some(4.0 * norm(*half_u) * norm(*half_v)),
+        LightKind::Rect { half_u, half_v, .. } => {
+            Some(4.0 * DVec3::from(*half_u).length() * DVec3::from(*half_v).length())
+        }
         LightKind::Disk { radius, .. } => Some(PI * radius * radius),
         LightKind::Sphere { radius, .. } => Some(4.0 * PI * radius * radius),
         LightKind::EmissiveMesh { mesh } => scene.meshes.get(*mesh).map(|m| mesh_area(m).0),

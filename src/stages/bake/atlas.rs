@@ -36,6 +36,7 @@
 
 use std::path::PathBuf;
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::scene::{Boundary, Mesh, Scene, SceneWarning};
@@ -348,8 +349,8 @@ fn prepare_mesh(
     let (mut area, mut uv_area, mut collapsed) = (0.0f64, 0.0f64, 0usize);
     let mut triangles = Vec::new();
     for (ti, t) in mesh.triangles.iter().enumerate() {
-        let p = t.map(|v| mesh.positions[v as usize].map(f64::from));
-        let world = 0.5 * norm(cross(sub(p[1], p[0]), sub(p[2], p[0])));
+        let p = t.map(|v| DVec3::from(mesh.positions[v as usize].map(f64::from)));
+        let world = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
         let q = t.map(|v| uv[v as usize]);
         let flat = 0.5 * ((q[1][0] - q[0][0]) * (q[2][1] - q[0][1]) - (q[1][1] - q[0][1]) * (q[2][0] - q[0][0])).abs();
         if world > 0.0 && flat > 0.0 {
@@ -613,31 +614,30 @@ fn rasterize(mesh: &Mesh, c: &Chartable, chart: &Chart, atlas_width: u32) -> (Ve
 
 /// World position and normals at the weights of `slot` on triangle `t`.
 fn sample(mesh: &Mesh, t: &Tri, slot: &Slot, pixel: u32, mi: usize) -> Texel {
-    let pos = |v: usize| mesh.positions[v].map(f64::from);
-    let mut position = [0.0; 3];
+    let pos = |v: usize| DVec3::from(mesh.positions[v].map(f64::from));
+    let mut position = DVec3::ZERO;
     for k in 0..3 {
-        position = add(position, scale(pos(t.idx[k]), slot.w[k]));
+        position += pos(t.idx[k]) * slot.w[k];
     }
     let tv = mesh.triangles[t.ti].map(|v| v as usize);
-    let geometric =
-        normalize(cross(sub(pos(tv[1]), pos(tv[0])), sub(pos(tv[2]), pos(tv[0])))).unwrap_or([0.0, 1.0, 0.0]);
+    let geometric = (pos(tv[1]) - pos(tv[0])).cross(pos(tv[2]) - pos(tv[0])).try_normalize().unwrap_or(DVec3::Y);
     let shading = (mesh.normals.len() == mesh.positions.len())
         .then(|| {
-            let mut n = [0.0; 3];
+            let mut n = DVec3::ZERO;
             for k in 0..3 {
-                n = add(n, scale(mesh.normals[t.idx[k]].map(f64::from), slot.w[k]));
+                n += DVec3::from(mesh.normals[t.idx[k]].map(f64::from)) * slot.w[k];
             }
-            normalize(n)
+            n.try_normalize()
         })
         .flatten()
-        .map_or(geometric, |n| if dot(n, geometric) < 0.0 { scale(n, -1.0) } else { n });
+        .map_or(geometric, |n| if n.dot(geometric) < 0.0 { n * -1.0 } else { n });
     Texel {
         pixel,
         mesh: mi,
         triangle: t.ti,
-        position,
-        normal: shading,
-        geometric_normal: geometric,
+        position: position.to_array(),
+        normal: shading.to_array(),
+        geometric_normal: geometric.to_array(),
         inside: slot.inside,
     }
 }
@@ -697,29 +697,6 @@ pub fn dilate(atlas: &Atlas, pixels: &mut [[f32; 3]], iterations: u32) -> Result
         }
     }
     Ok(filled)
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    a.map(|x| x * s)
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-fn normalize(a: [f64; 3]) -> Option<[f64; 3]> {
-    let l = norm(a);
-    (l > 0.0 && l.is_finite()).then(|| scale(a, 1.0 / l))
 }
 
 #[cfg(test)]

@@ -309,8 +309,8 @@ fn bundled_fog_room_charts_every_lightmapped_mesh() {
         let m = &s.meshes[c.mesh];
         let (mut area, mut uv_area) = (0.0, 0.0);
         for t in &m.triangles {
-            let p = t.map(|v| m.positions[v as usize].map(f64::from));
-            area += 0.5 * norm(cross(sub(p[1], p[0]), sub(p[2], p[0])));
+            let p = t.map(|v| glam::DVec3::from(m.positions[v as usize].map(f64::from)));
+            area += 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
             let q = t.map(|v| m.lightmap_uv.as_ref().expect("uv")[v as usize].map(f64::from));
             uv_area +=
                 0.5 * ((q[1][0] - q[0][0]) * (q[2][1] - q[0][1]) - (q[1][1] - q[0][1]) * (q[2][0] - q[0][0])).abs();
