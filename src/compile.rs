@@ -11,7 +11,7 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -259,12 +259,13 @@ pub fn compile(p: &ValidatedPipeline, opts: &CompileOptions) -> Result<CompileSu
     }
 
     let todo: Vec<usize> = (0..selected.len()).filter(|&i| results[i].is_none()).collect();
-    let total_units: u64 = todo.iter().map(|&i| 3 * selected[i].def().work_units()).sum();
-    let bar = progress_bar(opts.progress && !todo.is_empty(), total_units);
+    let lines = TableLines::new(opts.progress && !todo.is_empty());
     let run = || -> Vec<(usize, Result<TableResult, CompileError>)> {
         todo.par_iter()
             .map(|&i| {
                 let t = selected[i];
+                let bar = lines.start(t);
+                let t1 = Instant::now();
                 let r = build_table(t, &|n| bar.inc(n)).and_then(|(bytes, sidecar)| {
                     let json = serde_json::to_vec_pretty(&sidecar).unwrap_or_default();
                     out.store(t.id(), t.key(), &bytes, &json)?;
@@ -275,6 +276,7 @@ pub fn compile(p: &ValidatedPipeline, opts: &CompileOptions) -> Result<CompileSu
                         sidecar,
                     })
                 });
+                lines.finish(&bar, t, t1, r.is_ok());
                 (i, r)
             })
             .collect()
@@ -287,7 +289,6 @@ pub fn compile(p: &ValidatedPipeline, opts: &CompileOptions) -> Result<CompileSu
             .install(run),
         None => run(),
     };
-    bar.finish_and_clear();
     for (i, r) in built {
         results[i] = Some(r?);
     }
@@ -318,13 +319,58 @@ fn read_sidecar(path: &Path, t: &ValidatedTable) -> Result<Sidecar, CompileError
     }))
 }
 
+/// One progress line per table being compiled on a terminal (id, kind, work units done of its
+/// total in its own unit, rate, ETA); a finished table's line gives way to one line saying so.
+/// Nothing is drawn off a terminal.
+struct TableLines {
+    multi: MultiProgress,
+    style: Option<ProgressStyle>,
+}
+
+impl TableLines {
+    fn new(show: bool) -> Self {
+        let show = show && std::io::stderr().is_terminal();
+        let target = if show { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() };
+        let style = ProgressStyle::with_template(
+            "{spinner} {prefix:<20} {msg} [{elapsed_precise}] {wide_bar} {percent:>3}% {per_sec} ETA {eta}",
+        )
+        .ok();
+        TableLines { multi: MultiProgress::with_draw_target(target), style }
+    }
+
+    /// The line of table `t`: its generation reports `work_units` and its encoding and check one
+    /// more share each ([`build_table`]), hence a length of three shares.
+    fn start(&self, t: &ValidatedTable) -> ProgressBar {
+        let units = t.def().work_units();
+        let bar = self.multi.add(ProgressBar::new(3 * units));
+        if let Some(style) = &self.style {
+            bar.set_style(style.clone());
+        }
+        bar.set_prefix(t.id().to_string());
+        bar.set_message(format!("{} ({} {})", t.def().kind(), units, t.def().work_unit_name()));
+        bar
+    }
+
+    /// Replaces the line of table `t` by one summary line.
+    fn finish(&self, bar: &ProgressBar, t: &ValidatedTable, started: Instant, ok: bool) {
+        bar.finish_and_clear();
+        self.multi.remove(bar);
+        let what = if ok { "generated" } else { "failed" };
+        let secs = started.elapsed().as_secs_f64();
+        // A hidden display prints nothing; a broken terminal only loses the line.
+        let _ = self.multi.println(format!("{what:<10} {:<20} {:<10} in {secs:.1} s", t.id(), t.def().kind()));
+    }
+}
+
 /// A progress bar on stderr when `show` and stderr is a terminal; hidden otherwise.
 pub fn progress_bar(show: bool, total: u64) -> ProgressBar {
     if !show || !std::io::stderr().is_terminal() {
         return ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::hidden());
     }
     let bar = ProgressBar::new(total);
-    if let Ok(style) = ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} {msg}") {
+    if let Ok(style) =
+        ProgressStyle::with_template("{spinner} {msg} [{elapsed_precise}] {wide_bar} {pos}/{len} {per_sec} ETA {eta}")
+    {
         bar.set_style(style);
     }
     bar

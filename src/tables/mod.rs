@@ -266,6 +266,16 @@ impl TableDef {
         }
     }
 
+    /// What one of [`TableDef::work_units`] is, for progress lines.
+    pub fn work_unit_name(&self) -> &'static str {
+        match self {
+            TableDef::PhaseHg(_) => "g slices",
+            TableDef::ZhResponse(_) => "bounce responses",
+            TableDef::MsLobes(_) => "photons",
+            TableDef::PopPreset(_) => "quadrature chunks",
+        }
+    }
+
     /// Canonical RON text of the definition: part of the content key and stored in the header.
     pub fn canonical_ron(&self) -> String {
         // Serialising a plain struct of numbers, strings and enums cannot fail; fall back to Debug
