@@ -30,9 +30,10 @@ fn pipeline_in(dir: &Path, samples: u32) -> ValidatedPipeline {
 }
 
 static CPU: Device = Device::Cpu;
+static SCENES: std::sync::LazyLock<voltab::scene::cache::SceneCache> = std::sync::LazyLock::new(Default::default);
 
 fn ctx<'a>(out: &'a Path, base: &'a Path) -> StageContext<'a> {
-    StageContext { out_dir: out, base_dir: base, progress: false, device: &CPU }
+    StageContext { out_dir: out, base_dir: base, progress: false, device: &CPU, scenes: &SCENES }
 }
 
 fn bake_shards(p: &ValidatedPipeline, tables: &Path, root: &Path, n: u32) -> Vec<PathBuf> {

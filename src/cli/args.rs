@@ -246,61 +246,61 @@ pub struct ReportArgs {
 }
 
 #[derive(clap::Args)]
-#[command(group(clap::ArgGroup::new("focus").args(["bake", "effects", "translucent", "pop", "gpu", "shards"])))]
 pub struct BenchArgs {
     /// Pipeline file.
     #[arg(default_value = "pipelines/default.ron")]
     pub pipeline: PathBuf,
+    /// Which benchmark to run.
+    #[arg(long, value_enum, default_value_t = Suite::Tables)]
+    pub suite: Suite,
     /// Print the rows as JSON.
     #[arg(long)]
     pub json: bool,
-    /// Only tables with these ids (all when absent).
+    /// Only tables with these ids (all when absent); with `--suite shards`, tables or bake stages.
     #[arg(long, num_args = 1..)]
     pub only: Vec<String>,
     /// Skip the whole-pipeline compile comparisons (cold vs up-to-date, 1 vs N threads), which compile
     /// the pipeline three times; keep the per-table rows (zstd levels, ZH query throughput).
     #[arg(long)]
     pub tables_only: bool,
-    /// Also benchmark ray queries (BVH build; primary, incoherent and shadow rays; 1 vs N threads) on a
-    /// procedural scene of at least TRIANGLES triangles (default 1048576).
+    /// Ray queries on a procedural scene of at least TRIANGLES triangles (default 1048576): with the
+    /// tables suite, also run the ray benchmark; with `--suite rays`, its size.
     #[arg(long, value_name = "TRIANGLES", num_args = 0..=1, default_missing_value = "1048576")]
     pub rays: Option<usize>,
-    /// Only the ray benchmark (no pipeline tables).
-    #[arg(long)]
-    pub rays_only: bool,
-    /// Only the lightmap-bake benchmark of the pipeline's BakeLightmaps stages: texels/s and rays/s per
-    /// mode, the Full/Surface overhead, and the speed-up over volumetric path tracing at equal error.
-    #[arg(long)]
-    pub bake: bool,
-    /// Only the real-time effect benchmarks of the pipeline's EpipolarShadows and ImageFog stages: the
-    /// epipolar speed-up over ray marching at equal error (1 and 2 threads), the time-vs-resolution
-    /// slopes and the whole god-ray frame (shadow map + epipolar + composite) at 640×480 and 1280×720;
-    /// fog frame times at 720p and 1080p and the speed-up over the gathering reference.
-    #[arg(long)]
-    pub effects: bool,
-    /// Only the translucent-media benchmark of the pipeline's TranslucentRender stages: wang2018 Table 3's
-    /// time split per material at the stage's size and at 512×512, memory, naive vs two-step
-    /// traversal, and the speed-up over path tracing at equal MSE against the stage's reference and a
-    /// 4096-path one (about 5 min for the default pipeline).
-    #[arg(long)]
-    pub translucent: bool,
-    /// Only the POP benchmark of the pipeline's PopRender stages: the frame split into elek2014 Fig. 14's
-    /// phases and the isotropic residuum's speed-up over anisotropic propagation to convergence.
-    #[arg(long)]
-    pub pop: bool,
-    /// Only the GPU benchmark of the pipeline's real-time effects: each frame on the CPU and on the
-    /// GPU side by side, with per-pass GPU times (timestamp queries where the adapter has them;
-    /// on a software adapter such as lavapipe these are CPU times). Needs the `gpu` feature.
-    #[arg(long)]
-    pub gpu: bool,
-    /// Where the bake's tables are compiled (cached).
+    /// Where the stages' tables are compiled (cached).
     #[arg(long, default_value = "out")]
     pub tables: PathBuf,
-    /// Only the scale-out benchmark: each table (--only, default the MsLobes tables) compiled whole
-    /// vs as its work units one by one plus the merge; overhead, merge share, and the wall time
-    /// projected on 1, 8, 64 and 512 nodes (and at wang2018's size for lobe tables).
-    #[arg(long)]
-    pub shards: bool,
+}
+
+/// The benchmark suites of `voltab bench --suite`.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Suite {
+    /// The pipeline's tables: cold vs no-op compile, 1 vs N threads, zstd levels, ZH query throughput.
+    Tables,
+    /// Ray queries (BVH build; primary, incoherent and shadow rays; 1 vs N threads) on a procedural
+    /// scene (no pipeline tables).
+    Rays,
+    /// The BakeLightmaps stages: texels/s and rays/s per mode, the Full/Surface overhead, and the
+    /// speed-up over volumetric path tracing at equal error.
+    Bake,
+    /// The EpipolarShadows and ImageFog stages: the epipolar speed-up over ray marching at equal error
+    /// (1 and 2 threads), the time-vs-resolution slopes and the whole god-ray frame at 640×480 and
+    /// 1280×720; fog frame times at 720p and 1080p and the speed-up over the gathering reference.
+    Effects,
+    /// The TranslucentRender stages: wang2018 Table 3's time split per material at the stage's size and
+    /// at 512×512, memory, naive vs two-step traversal, and the speed-up over path tracing at equal MSE
+    /// (about 5 min for the default pipeline).
+    Translucent,
+    /// The PopRender stages: the frame split into elek2014 Fig. 14's phases and the isotropic
+    /// residuum's speed-up over anisotropic propagation to convergence.
+    Pop,
+    /// The real-time effects on the CPU and on the GPU side by side, with per-pass GPU times
+    /// (timestamp queries where the adapter has them; CPU times on lavapipe). Needs the `gpu` feature.
+    Gpu,
+    /// Scale-out: each table (--only, default the MsLobes tables) compiled whole vs as its work units
+    /// plus the merge, and the bakes as tiles; overhead, merge share, and the wall time projected on 1,
+    /// 8, 64 and 512 nodes (and at wang2018's size for lobe tables).
+    Shards,
 }
 
 #[derive(clap::Args)]

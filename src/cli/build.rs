@@ -8,12 +8,19 @@ use super::*;
 pub fn run(a: RunArgs) -> Result<ExitCode> {
     let RunArgs { pipeline, out, jobs, json, scene, device, shard, tables } = a;
     let progress = progress();
+    let cache = SceneCache::default();
     if let (Some(shard), Some(tables)) = (shard, tables) {
         let spec = voltab::shard::ShardSpec::parse(&shard, &|k| std::env::var(k).ok())?;
-        let p = planned(load(&pipeline)?, &scene, true)?;
+        let p = planned(load(&pipeline)?, &scene, true, &cache)?;
         let base = base_dir(&p);
         let cpu_device = voltab::render::gpu::Device::Cpu;
-        let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress, device: &cpu_device };
+        let ctx = voltab::stages::StageContext {
+            out_dir: &tables,
+            base_dir: &base,
+            progress,
+            device: &cpu_device,
+            scenes: &cache,
+        };
         let run = || voltab::shard::bake::bake_shard(&p, &scene, spec, &ctx, &out);
         let s = match jobs {
             Some(j) => rayon::ThreadPoolBuilder::new().num_threads(j).build()?.install(run)?,
@@ -22,13 +29,14 @@ pub fn run(a: RunArgs) -> Result<ExitCode> {
         print_shard("bake shard", "tiles", &s, json)?;
         return Ok(ExitCode::SUCCESS);
     }
-    let p = planned(load(&pipeline)?, &scene, json)?;
+    let p = planned(load(&pipeline)?, &scene, json, &cache)?;
     let summary =
         voltab::compile::compile(&p, &CompileOptions { out_dir: out.clone(), only: Vec::new(), jobs, progress })?;
     let mut stage_results = Vec::new();
     let base = base_dir(&p);
     let device = stage_device(&p, device)?;
-    let ctx = voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress, device: &device };
+    let ctx =
+        voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress, device: &device, scenes: &cache };
     for s in p.stages() {
         let missing: Vec<PathBuf> = s.def().scenes(&base).into_iter().filter(|f| !f.exists()).collect();
         if !missing.is_empty() && !pipeline.exists() {
@@ -70,6 +78,7 @@ pub fn run(a: RunArgs) -> Result<ExitCode> {
 pub fn compile(a: CompileArgs) -> Result<ExitCode> {
     let CompileArgs { pipeline, out, only, jobs, json, scene, shard } = a;
     let progress = progress();
+    let cache = SceneCache::default();
     if let Some(shard) = shard {
         if !only.is_empty() {
             anyhow::bail!(
@@ -77,12 +86,12 @@ pub fn compile(a: CompileArgs) -> Result<ExitCode> {
             );
         }
         let spec = voltab::shard::ShardSpec::parse(&shard, &|k| std::env::var(k).ok())?;
-        let p = planned(load(&pipeline)?, &scene, true)?;
+        let p = planned(load(&pipeline)?, &scene, true, &cache)?;
         let s = voltab::shard::compile_shard(&p, &scene, spec, &out, jobs, progress)?;
         print_shard("shard", "units", &s, json)?;
         return Ok(ExitCode::SUCCESS);
     }
-    let p = planned(load(&pipeline)?, &scene, json)?;
+    let p = planned(load(&pipeline)?, &scene, json, &cache)?;
     let summary = voltab::compile::compile(&p, &CompileOptions { out_dir: out.clone(), only, jobs, progress })?;
     if json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -101,14 +110,16 @@ pub fn compile(a: CompileArgs) -> Result<ExitCode> {
 /// `voltab merge`: the shard folders of a sharded compile (or bake) → the same bytes as one machine's.
 pub fn merge(a: MergeArgs) -> Result<ExitCode> {
     let progress = progress();
+    let cache = SceneCache::default();
     let MergeArgs { shards, out, pipeline, json, device } = a;
     let first = voltab::shard::read_manifest(&shards[0])?;
     let path = pipeline.unwrap_or_else(|| first.pipeline.clone());
-    let p = planned(load(&path)?, &first.scenes, true)?;
+    let p = planned(load(&path)?, &first.scenes, true, &cache)?;
     if first.job == voltab::shard::Job::Bake {
         let base = base_dir(&p);
         let device = stage_device(&p, device)?;
-        let ctx = voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress, device: &device };
+        let ctx =
+            voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress, device: &device, scenes: &cache };
         let results = voltab::shard::bake::merge_bake(&p, &shards, &ctx)?;
         if json {
             println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "stages": results }))?);
@@ -142,7 +153,7 @@ pub fn merge(a: MergeArgs) -> Result<ExitCode> {
 /// `voltab slurm`: writes (and with `--submit` submits) the Slurm array and merge jobs.
 pub fn slurm(a: SlurmArgs) -> Result<ExitCode> {
     let SlurmArgs { pipeline, shards, partition, time, cpus_per_task, out, scene, submit } = a;
-    let p = planned(load(&pipeline)?, &scene, true)?;
+    let p = planned(load(&pipeline)?, &scene, true, &SceneCache::default())?;
     let exe = std::env::current_exe()?;
     let opts = voltab::shard::slurm::SlurmOptions { shards, partition, time, out, scenes: scene, cpus_per_task };
     let job = voltab::shard::slurm::write_and_submit(&p, &exe, &opts, submit)?;

@@ -7,6 +7,7 @@ use super::*;
 pub fn report(a: ReportArgs) -> Result<ExitCode> {
     let ReportArgs { pipeline, out, stages, tables } = a;
     let progress = progress();
+    let cache = SceneCache::default();
     let cpu_device = voltab::render::gpu::Device::Cpu;
     if !stages {
         let p = load(&pipeline)?;
@@ -14,9 +15,15 @@ pub fn report(a: ReportArgs) -> Result<ExitCode> {
         print!("{}", voltab::report::markdown(&r));
         println!("wrote {}/report.json, report.md and {} plots", out.display(), r.tables.len());
     }
-    if let Some(p) = compiled_for_stages(&pipeline, &tables, progress)? {
+    if let Some(p) = compiled_for_stages(&pipeline, &tables, progress, &cache)? {
         let base = base_dir(&p);
-        let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress, device: &cpu_device };
+        let ctx = voltab::stages::StageContext {
+            out_dir: &tables,
+            base_dir: &base,
+            progress,
+            device: &cpu_device,
+            scenes: &cache,
+        };
         for s in p.stages() {
             if let Some(md) = s.def().report(s.id(), &ctx, &out)? {
                 print!("{md}");
@@ -29,68 +36,70 @@ pub fn report(a: ReportArgs) -> Result<ExitCode> {
 
 /// `voltab bench`: timings measured side by side, as ratios (the flags choose which).
 pub fn bench(a: BenchArgs) -> Result<ExitCode> {
-    let BenchArgs {
-        pipeline,
-        json,
-        only,
-        tables_only,
-        rays,
-        rays_only,
-        bake,
-        effects,
-        translucent,
-        pop,
-        gpu,
-        tables,
-        shards,
-    } = a;
+    use voltab::stages::BenchFocus;
+    let BenchArgs { pipeline, suite, json, only, tables_only, rays, tables } = a;
     let progress = progress();
+    let cache = SceneCache::default();
     let cpu_device = voltab::render::gpu::Device::Cpu;
     let mut rows = Vec::new();
-    if shards {
-        let p = load(&pipeline)?;
-        let is_stage = |o: &String| p.stages().iter().any(|s| s.id() == o.as_str());
-        let (stage_only, table_only): (Vec<String>, Vec<String>) = only.iter().cloned().partition(is_stage);
-        let say = |m: &str| {
-            if progress {
-                eprintln!("{m}");
+    let focus = match suite {
+        Suite::Tables => {
+            let p = load(&pipeline)?;
+            rows = voltab::bench::run(&p, &voltab::bench::BenchOptions { only, tables_only })?;
+            if let Some(triangles) = rays {
+                rows.extend(voltab::bench::ray_rows(triangles)?);
             }
-        };
-        // Prints a measurement's text (unless --json) and keeps its rows.
-        let mut keep = |(text, r): (String, Vec<_>)| {
-            if !json {
-                print!("{text}");
-            }
-            rows.extend(r);
-        };
-        if only.is_empty() || !table_only.is_empty() {
-            keep(voltab::shard::bench::run(&p, &table_only, &say).map_err(|e| anyhow::anyhow!(e))?);
+            None
         }
-        // The lightmap bakes as tiles (their tables compiled into --tables first).
-        if (only.is_empty() || !stage_only.is_empty())
-            && let Some(p) = compiled_for_stages(&pipeline, &tables, progress)?
-        {
-            let base = base_dir(&p);
-            let ctx = voltab::stages::StageContext {
-                out_dir: &tables,
-                base_dir: &base,
-                progress: false,
-                device: &cpu_device,
+        Suite::Rays => {
+            rows = voltab::bench::ray_rows(rays.unwrap_or(voltab::bench::RAY_BENCH_TRIANGLES))?;
+            None
+        }
+        Suite::Shards => {
+            let p = load(&pipeline)?;
+            let is_stage = |o: &String| p.stages().iter().any(|s| s.id() == o.as_str());
+            let (stage_only, table_only): (Vec<String>, Vec<String>) = only.iter().cloned().partition(is_stage);
+            let say = |m: &str| {
+                if progress {
+                    eprintln!("{m}");
+                }
             };
-            keep(voltab::shard::bench::bake(&p, &ctx, &stage_only, &say).map_err(|e| anyhow::anyhow!(e))?);
+            // Prints a measurement's text (unless --json) and keeps its rows.
+            let mut keep = |(text, r): (String, Vec<_>)| {
+                if !json {
+                    print!("{text}");
+                }
+                rows.extend(r);
+            };
+            if only.is_empty() || !table_only.is_empty() {
+                keep(voltab::shard::bench::run(&p, &table_only, &say).map_err(|e| anyhow::anyhow!(e))?);
+            }
+            // The lightmap bakes as tiles (their tables compiled into --tables first).
+            if (only.is_empty() || !stage_only.is_empty())
+                && let Some(p) = compiled_for_stages(&pipeline, &tables, progress, &cache)?
+            {
+                let base = base_dir(&p);
+                let ctx = voltab::stages::StageContext {
+                    out_dir: &tables,
+                    base_dir: &base,
+                    progress: false,
+                    device: &cpu_device,
+                    scenes: &cache,
+                };
+                keep(voltab::shard::bench::bake(&p, &ctx, &stage_only, &say).map_err(|e| anyhow::anyhow!(e))?);
+            }
+            None
         }
-    } else if gpu || bake || translucent || pop || effects {
-        // The stages' own benchmarks; effects need no tables, the others compile theirs first.
-        use voltab::stages::BenchFocus;
-        let focus = [
-            (bake, BenchFocus::Bake),
-            (translucent, BenchFocus::Translucent),
-            (pop, BenchFocus::Pop),
-            (effects, BenchFocus::Effects),
-        ]
-        .into_iter()
-        .find_map(|(on, f)| on.then_some(f));
-        let device = if gpu {
+        Suite::Bake => Some(Some(BenchFocus::Bake)),
+        Suite::Effects => Some(Some(BenchFocus::Effects)),
+        Suite::Translucent => Some(Some(BenchFocus::Translucent)),
+        Suite::Pop => Some(Some(BenchFocus::Pop)),
+        Suite::Gpu => Some(None),
+    };
+    // The stages' own benchmarks (`None`: their GPU benchmarks); effects need no tables, the others
+    // compile theirs into --tables first.
+    if let Some(focus) = focus {
+        let device = if focus.is_none() {
             let (device, message) =
                 voltab::render::gpu::select(voltab::render::gpu::DeviceRequest::Gpu).map_err(|e| anyhow::anyhow!(e))?;
             eprintln!("{message}");
@@ -98,17 +107,25 @@ pub fn bench(a: BenchArgs) -> Result<ExitCode> {
         } else {
             cpu_device
         };
-        let p = if effects { Some(load(&pipeline)?) } else { compiled_for_stages(&pipeline, &tables, progress)? };
+        let p = if focus == Some(BenchFocus::Effects) {
+            Some(load(&pipeline)?)
+        } else {
+            compiled_for_stages(&pipeline, &tables, progress, &cache)?
+        };
         if let Some(p) = p {
             let base = base_dir(&p);
-            let ctx = voltab::stages::StageContext { out_dir: &tables, base_dir: &base, progress, device: &device };
+            let ctx = voltab::stages::StageContext {
+                out_dir: &tables,
+                base_dir: &base,
+                progress,
+                device: &device,
+                scenes: &cache,
+            };
             for s in p.stages() {
-                let measured = if gpu {
-                    s.def().bench_gpu(s.id(), &ctx)?
-                } else if focus.is_some() && s.def().bench_focus() == focus {
-                    s.def().bench(s.id(), &ctx)?
-                } else {
-                    None
+                let measured = match focus {
+                    None => s.def().bench_gpu(s.id(), &ctx)?,
+                    Some(f) if s.def().bench_focus() == Some(f) => s.def().bench(s.id(), &ctx)?,
+                    Some(_) => None,
                 };
                 if let Some((text, r)) = measured {
                     if !json && !text.is_empty() {
@@ -118,12 +135,6 @@ pub fn bench(a: BenchArgs) -> Result<ExitCode> {
                 }
             }
         }
-    } else if !rays_only {
-        let p = load(&pipeline)?;
-        rows = voltab::bench::run(&p, &voltab::bench::BenchOptions { only, tables_only })?;
-    }
-    if rays.is_some() || rays_only {
-        rows.extend(voltab::bench::ray_rows(rays.unwrap_or(voltab::bench::RAY_BENCH_TRIANGLES))?);
     }
     if json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
@@ -177,7 +188,8 @@ pub(super) fn validate(
     progress: bool,
 ) -> Result<()> {
     use voltab::validation::{self, Validation, cases};
-    let p = compiled_for_stages(pipeline, tables, progress)?
+    let cache = SceneCache::default();
+    let p = compiled_for_stages(pipeline, tables, progress, &cache)?
         .ok_or_else(|| anyhow::anyhow!("{}: no stage reads a scene; nothing to validate", pipeline.display()))?;
     if let Some(bad) = only.iter().find(|id| !p.stages().iter().any(|s| s.id() == id.as_str())) {
         let ids: Vec<&str> = p.stages().iter().map(|s| s.id()).collect();
@@ -185,7 +197,8 @@ pub(super) fn validate(
     }
     let base = base_dir(&p);
     let device = voltab::render::gpu::Device::Cpu;
-    let ctx = voltab::stages::StageContext { out_dir: tables, base_dir: &base, progress, device: &device };
+    let ctx =
+        voltab::stages::StageContext { out_dir: tables, base_dir: &base, progress, device: &device, scenes: &cache };
     let harness = validation::python::Harness::locate();
     let mut results = Vec::new();
     for s in p.stages().iter().filter(|s| only.is_empty() || only.iter().any(|id| id == s.id())) {

@@ -22,6 +22,7 @@ use args::*;
 use voltab::compile::{CompileOptions, compile, summary_line};
 use voltab::container::{self, VtabReader};
 use voltab::pipeline::{self, Disk, Embedded, Sources, ValidatedPipeline};
+use voltab::scene::cache::SceneCache;
 
 /// Runs a command (`None`: the main job, the default pipeline on the bundled scenes).
 pub fn dispatch(cmd: Option<Command>) -> Result<ExitCode> {
@@ -97,13 +98,18 @@ pub(super) fn bundled_scenes() -> Vec<PathBuf> {
 
 /// For stage ladders and benchmarks: the pipeline planned for the scenes its stages read, with those tables
 /// compiled into `tables` (cached); `None` when no stage reads a scene.
-pub(super) fn compiled_for_stages(pipeline: &Path, tables: &Path, progress: bool) -> Result<Option<ValidatedPipeline>> {
+pub(super) fn compiled_for_stages(
+    pipeline: &Path,
+    tables: &Path,
+    progress: bool,
+    cache: &SceneCache,
+) -> Result<Option<ValidatedPipeline>> {
     let p = load(pipeline)?;
     let scenes: Vec<PathBuf> = p.stages().iter().flat_map(|s| s.def().scenes(&base_dir(&p))).collect();
     if scenes.is_empty() {
         return Ok(None);
     }
-    let p = planned(p, &scenes, true)?;
+    let p = planned(p, &scenes, true, cache)?;
     compile(&p, &CompileOptions { out_dir: tables.to_path_buf(), only: Vec::new(), jobs: None, progress })?;
     Ok(Some(p))
 }
@@ -145,7 +151,12 @@ pub(super) fn load_scene(path: &Path) -> Result<voltab::scene::Scene> {
 /// The pipeline pruned to what `scenes` need (unchanged when there are none); the plan goes to stderr.
 ///
 /// The scenes that stages read (a bake's scene) are planned for too, so the tables they need are kept.
-pub(super) fn planned(p: ValidatedPipeline, scenes: &[PathBuf], quiet: bool) -> Result<ValidatedPipeline> {
+pub(super) fn planned(
+    p: ValidatedPipeline,
+    scenes: &[PathBuf],
+    quiet: bool,
+    cache: &SceneCache,
+) -> Result<ValidatedPipeline> {
     if scenes.is_empty() {
         return Ok(p);
     }
@@ -159,7 +170,9 @@ pub(super) fn planned(p: ValidatedPipeline, scenes: &[PathBuf], quiet: bool) -> 
             }
         }
     }
-    let loaded = scenes.iter().map(|f| load_scene(f)).collect::<Result<Vec<_>>>()?;
+    // Imported into the run's cache: the stages that read these scenes do not import them again.
+    let loaded =
+        scenes.iter().map(|f| cache.load(f).map_err(|e| anyhow::anyhow!("{e}"))).collect::<Result<Vec<_>>>()?;
     for s in &loaded {
         for w in &s.warnings {
             eprintln!("warning: {}: {}: {}\n  help: {}", s.source.display(), w.location, w.message, w.help);

@@ -23,6 +23,8 @@
 //! The ZH distance axis is the exception: bounce `b` is computed from bounce `b − 1` over the whole axis,
 //! so trimming it changes the kept distances slightly (2e-8 relative with the margin; see the tests).
 
+use std::borrow::Borrow;
+
 use serde::Serialize;
 
 use crate::pipeline::{Limits, ValidatedPipeline, ValidatedStage, ValidatedTable};
@@ -151,10 +153,10 @@ pub struct Plan {
 
 impl Needs {
     /// Collects the needs of the scenes (a union: a slice is needed when any scene needs it).
-    pub fn of(scenes: &[Scene]) -> Needs {
+    pub fn of<S: Borrow<Scene>>(scenes: &[S]) -> Needs {
         let mut n = Needs::default();
         let many = scenes.len() > 1;
-        for scene in scenes {
+        for scene in scenes.iter().map(Borrow::borrow) {
             let tag = |name: &str| {
                 if many { format!("{} ({})", name, scene.source.display()) } else { name.to_string() }
             };
@@ -586,7 +588,7 @@ fn translucent_lacks(sc: &Scene, t: &crate::stages::translucent::TranslucentRend
 
 /// The materials of `TranslucentRender` stages whose scene is planned: the `MsLobes` slices they read
 /// are needs like the scenes' own translucent media.
-fn translucent_stage_needs(p: &ValidatedPipeline, scenes: &[Scene]) -> Vec<MediumNeed> {
+fn translucent_stage_needs(p: &ValidatedPipeline, scenes: &[&Scene]) -> Vec<MediumNeed> {
     let base = p.path().parent().unwrap_or(std::path::Path::new("")).to_path_buf();
     let mut out = Vec::new();
     for s in p.stages() {
@@ -620,7 +622,7 @@ fn effect_stage(
     effect: &str,
     scene: &str,
     p: &ValidatedPipeline,
-    scenes: &[Scene],
+    scenes: &[&Scene],
     lacks: impl Fn(&Scene) -> Option<&'static str>,
 ) -> StagePlan {
     let path = p.path().parent().unwrap_or(std::path::Path::new("")).join(scene);
@@ -640,8 +642,11 @@ fn effect_stage(
 }
 
 impl Plan {
-    /// Plans a pipeline for scenes (their union of needs).
-    pub fn new(p: &ValidatedPipeline, scenes: &[Scene]) -> Plan {
+    /// Plans a pipeline for scenes (their union of needs): `Scene`s, or scenes shared from a
+    /// [`crate::scene::cache::SceneCache`].
+    pub fn new<S: Borrow<Scene>>(p: &ValidatedPipeline, scenes: &[S]) -> Plan {
+        let scenes: Vec<&Scene> = scenes.iter().map(Borrow::borrow).collect();
+        let scenes = scenes.as_slice();
         let mut needs = Needs::of(scenes);
         needs.translucent.extend(translucent_stage_needs(p, scenes));
         let tables: Vec<TablePlan> = p

@@ -28,6 +28,7 @@
 //! ([`Boundary::Global`]).
 
 pub mod bvh;
+pub mod cache;
 pub mod check;
 pub mod extent;
 #[cfg(test)]

@@ -40,7 +40,7 @@ pub fn bake_units(p: &ValidatedPipeline, ctx: &StageContext) -> Result<(Vec<Unit
         let (scene, texels) = b.scene_and_texels(s.id(), ctx).map_err(stage_err)?;
         h.update(s.id().as_bytes());
         h.update(&serde_json::to_vec(s.def()).unwrap_or_default());
-        h.update(&bincode::serde::encode_to_vec(&scene, bincode::config::standard()).unwrap_or_default());
+        h.update(&bincode::serde::encode_to_vec(scene.as_ref(), bincode::config::standard()).unwrap_or_default());
         let tiles = texels.div_ceil(TILE_TEXELS);
         for (mi, mode) in b.modes.iter().enumerate() {
             for k in 0..tiles {
@@ -112,6 +112,7 @@ pub fn bake_shard(
     let tiles = tiles_per_mode(p, &units);
     let mine: Vec<&Unit> = units.iter().zip(&owner).filter(|(_, s)| **s == spec.index).map(|(u, _)| u).collect();
     let bar = crate::compile::progress_bar(ctx.progress, mine.iter().map(|u| u.cost).sum());
+    bar.set_message(format!("bake shard {}/{}: texels", spec.index, spec.count));
     let mut parts = Vec::with_capacity(mine.len());
     let (mut computed, mut reused) = (Vec::new(), Vec::new());
     // One stage prepared at a time (scene, BVH, table, atlas), for all of its tiles in this shard.

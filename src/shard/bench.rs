@@ -1,4 +1,4 @@
-//! `voltab bench --shards`: what sharding a table's compile costs and buys, measured side by side in
+//! `voltab bench --suite shards`: what sharding a table's compile costs and buys, measured side by side in
 //! one run.
 //!
 //! Input: a validated pipeline and the ids of tables to measure (default: its `MsLobes` tables).
@@ -219,7 +219,7 @@ pub fn run(p: &ValidatedPipeline, only: &[String], say: &dyn Fn(&str)) -> Result
     Ok((text, rows))
 }
 
-/// `voltab bench --shards` for the lightmap bakes of `p` (tables read from `ctx.out_dir`; outputs
+/// `voltab bench --suite shards` for the lightmap bakes of `p` (tables read from `ctx.out_dir`; outputs
 /// written there): each bake run whole as `voltab run` runs it, then as its tiles one by one (one
 /// preparation — scene, BVH, table, atlas — as a bake task does once) plus the merge that finishes it
 /// (reads the tiles, dilates, writes, checks against path tracing, bakes the probes), with the

@@ -174,7 +174,9 @@ pub fn write_and_submit(
     let bake = if p.stages().iter().any(|s| matches!(s.def(), StageDef::BakeLightmaps(_))) {
         let base = p.path().parent().map(Path::to_path_buf).unwrap_or_default();
         let device = crate::render::gpu::Device::Cpu;
-        let ctx = StageContext { out_dir: &out, base_dir: &base, progress: false, device: &device };
+        let scene_cache = crate::scene::cache::SceneCache::default();
+        let ctx =
+            StageContext { out_dir: &out, base_dir: &base, progress: false, device: &device, scenes: &scene_cache };
         let (_, key) = super::bake::bake_units(p, &ctx)?;
         let bake_script = dir.join("bake.sbatch");
         let bake_array = format!(

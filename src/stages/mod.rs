@@ -19,8 +19,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::tables::FieldIssue;
 
-/// The stages' own benchmarks, one per `voltab bench` flag (`--bake`, `--effects`, `--translucent`,
-/// `--pop`).
+/// The stages' own benchmarks, one per `voltab bench --suite` (`bake`, `effects`, `translucent`,
+/// `pop`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BenchFocus {
     /// Lightmap bakes.
@@ -96,6 +96,8 @@ pub struct StageContext<'a> {
     /// Where the real-time effects (`PopRender`, `EpipolarShadows`, `ImageFog`) run; the other
     /// stages ignore it.
     pub device: &'a crate::render::gpu::Device,
+    /// The run's imported scenes: a scene the planner or an earlier stage read is not imported again.
+    pub scenes: &'a crate::scene::cache::SceneCache,
 }
 
 /// What a stage wrote.
@@ -262,7 +264,7 @@ impl StageDef {
         }
     }
 
-    /// `voltab bench --bake | --effects | --translucent | --pop`: the stage's own benchmark, its text
+    /// `voltab bench --suite bake | effects | translucent | pop`: the stage's own benchmark, its text
     /// (empty for the bake, whose rows say it all) and rows; `None` for stages without one.
     pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<BenchRow>)>, StageError> {
         match self {
@@ -275,7 +277,7 @@ impl StageDef {
         }
     }
 
-    /// `voltab bench --gpu`: the effect's frame on the CPU and on `ctx.device` side by side, with the
+    /// `voltab bench --suite gpu`: the effect's frame on the CPU and on `ctx.device` side by side, with the
     /// GPU's per-pass times; `None` for stages without a GPU path.
     pub fn bench_gpu(
         &self,

@@ -60,7 +60,7 @@ pub(crate) use impl_view_fields;
 /// A loaded view.
 pub struct View {
     /// The scene.
-    pub scene: Scene,
+    pub scene: std::sync::Arc<Scene>,
     /// Its BVH.
     pub bvh: SceneBvh,
     /// Colour and distance buffers of the chosen camera.
@@ -122,7 +122,7 @@ impl ViewFields<'_> {
         let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
         let path = self.scene_path(ctx.base_dir);
         let t0 = Instant::now();
-        let scene = Scene::load(&path).map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
+        let scene = ctx.scenes.load(&path).map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
         let import_ms = ms(t0);
         let t0 = Instant::now();
         let bvh = SceneBvh::build(&scene);

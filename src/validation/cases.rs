@@ -106,7 +106,7 @@ fn bake(
             spp,
             max_depth: vec![-1],
         },
-        scene: check.scene,
+        scene: std::sync::Arc::unwrap_or_clone(check.scene),
         minus_scene: None,
         export: ExportOptions::default(),
         methods,

@@ -251,9 +251,11 @@ impl BakeLightmaps {
 
     /// The imported scene and the texel count of its atlas: what a farm bake splits into
     /// [`TILE_TEXELS`]-texel tiles per mode.
-    pub fn scene_and_texels(&self, id: &str, ctx: &StageContext) -> Result<(Scene, usize), StageError> {
+    pub fn scene_and_texels(&self, id: &str, ctx: &StageContext) -> Result<(std::sync::Arc<Scene>, usize), StageError> {
         let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
-        let scene = Scene::load(&self.scene_path(ctx.base_dir))
+        let scene = ctx
+            .scenes
+            .load(&self.scene_path(ctx.base_dir))
             .map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
         let atlas = atlas::build(&scene, &self.atlas_options())
             .map_err(|e| fail(e.to_string(), "add lightmap UVs to the scene's meshes"))?;
@@ -505,7 +507,7 @@ impl BakeLightmaps {
         Ok(TexelCheck { scene, points, modes })
     }
 
-    /// `voltab bench --bake`: every mode over the whole atlas at this stage's quality (texels/s, rays/s,
+    /// `voltab bench --suite bake`: every mode over the whole atlas at this stage's quality (texels/s, rays/s,
     /// overhead of Shadow and Full over Surface measured in one run), and the speed-up of the Full bake
     /// over the brute-force reference at equal error on a 256-texel subset (the [`report::ladder`]).
     pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<Vec<crate::stages::BenchRow>, StageError> {
@@ -577,7 +579,9 @@ impl BakeLightmaps {
     fn prepare(&self, id: &str, ctx: &StageContext) -> Result<Prepared, StageError> {
         let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
         let t0 = Instant::now();
-        let scene = Scene::load(&self.scene_path(ctx.base_dir))
+        let scene = ctx
+            .scenes
+            .load(&self.scene_path(ctx.base_dir))
             .map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
         let import_ms = ms(t0);
         let t0 = Instant::now();
@@ -714,7 +718,7 @@ impl BakeLightmaps {
 
 /// What every use of a bake stage (run, report, bench) starts from.
 struct Prepared {
-    scene: Scene,
+    scene: std::sync::Arc<Scene>,
     bvh: SceneBvh,
     table: Option<ZhResponseTable>,
     atlas: atlas::Atlas,
@@ -730,7 +734,7 @@ struct Prepared {
 #[derive(Debug)]
 pub struct TexelCheck {
     /// The imported scene the bake read.
-    pub scene: Scene,
+    pub scene: std::sync::Arc<Scene>,
     /// The texels.
     pub points: Vec<TexelPoint>,
     /// Per mode: irradiance per texel \[W/m²\], RGB, and the wall time \[ms\].
@@ -759,7 +763,7 @@ pub fn bake_points(
     label: &str,
 ) -> Result<Vec<Estimate>, transport::TransportError> {
     let bar = crate::compile::progress_bar(progress, points.len() as u64);
-    bar.set_message(label.to_string());
+    bar.set_message(format!("bake {label}: texels"));
     let out: Result<Vec<Vec<Estimate>>, _> = points
         .par_chunks(64)
         .map(|chunk| {

@@ -333,7 +333,7 @@ impl EpipolarShadows {
         })
     }
 
-    /// `voltab bench --gpu`: the stage's frame on the CPU and on `ctx.device` side by side (median of
+    /// `voltab bench --suite gpu`: the stage's frame on the CPU and on `ctx.device` side by side (median of
     /// 3 each, shadow map excluded: both share it), the GPU time of every phase, and how far the
     /// device's in-scatter is from the CPU's.
     pub fn bench_gpu(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<BenchRow>), StageError> {
@@ -419,7 +419,7 @@ impl EpipolarShadows {
         ))
     }
 
-    /// `voltab bench --effects`: [`epipolar::bench::bench`] on this stage's scene (1280×960, 1 and 2
+    /// `voltab bench --suite effects`: [`epipolar::bench::bench`] on this stage's scene (1280×960, 1 and 2
     /// threads, error against time of both methods, speed-up at equal error, time-vs-resolution slopes).
     pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<BenchRow>), StageError> {
         let r = epipolar::bench::bench(&self.scene_path(ctx.base_dir), false).map_err(|e| StageError::Input {
@@ -456,7 +456,7 @@ impl EpipolarShadows {
             |path: &Path, message: String| StageError::Output { stage: id.into(), path: path.to_path_buf(), message };
         let fields = self.fields();
         let path = fields.scene_path(ctx.base_dir);
-        let scene = Scene::load(&path).map_err(|e| StageError::Input {
+        let scene = ctx.scenes.load(&path).map_err(|e| StageError::Input {
             stage: id.into(),
             message: e.to_string(),
             help: "fix the scene file or the scene field".into(),

@@ -379,7 +379,7 @@ impl ImageFogStage {
         }
         let path = self.fields().scene_path(ctx.base_dir);
         let t1 = Instant::now();
-        let scene = Scene::load(&path).map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
+        let scene = ctx.scenes.load(&path).map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
         let import_ms = ms(t1);
         let t1 = Instant::now();
         let bvh = SceneBvh::build(&scene);
@@ -462,7 +462,7 @@ impl ImageFogStage {
         Ok(md)
     }
 
-    /// `voltab bench --effects`: frame time and phases at 1280×720 and 1920×1080 (G-buffer colour of the
+    /// `voltab bench --suite effects`: frame time and phases at 1280×720 and 1920×1080 (G-buffer colour of the
     /// scene, 2 paths per pixel) on the current rayon pool, and the gathering reference at 1080p on a
     /// stratified pixel subset, extrapolated per pixel.
     pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<BenchRow>), StageError> {

@@ -421,6 +421,7 @@ impl TranslucentRender {
     ) -> Result<(render::Frame, render::Prepared), String> {
         let prep = render::prepare(setup, table, &self.point_options(), &self.render_options())?;
         let bar = crate::compile::progress_bar(progress, cam.height as u64);
+        bar.set_message(format!("translucent frame {}×{}: rows", cam.width, cam.height));
         let frame = render::render(setup, table, &prep, cam, &self.render_options(), &|n| bar.inc(n))?;
         bar.finish_and_clear();
         Ok((frame, prep))
@@ -463,7 +464,7 @@ impl TranslucentRender {
     fn load(&self, id: &str, ctx: &StageContext) -> Result<Loaded, StageError> {
         let fail = |message: String, help: &str| StageError::Input { stage: id.into(), message, help: help.into() };
         let path = self.scene_path(ctx.base_dir);
-        let scene = Scene::load(&path).map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
+        let scene = ctx.scenes.load(&path).map_err(|e| fail(e.to_string(), "fix the scene file or the scene field"))?;
         let bvh = SceneBvh::build(&scene);
         let (object, ior) = find_object(&scene, &bvh).ok_or_else(|| {
             fail(
@@ -550,7 +551,7 @@ fn scene_medium(scene: &Scene, ior: f64) -> Option<Material> {
 /// A loaded scene with its translucent object and emitters.
 pub struct Loaded {
     /// The scene.
-    pub scene: Scene,
+    pub scene: std::sync::Arc<Scene>,
     /// Its BVH.
     pub bvh: SceneBvh,
     /// The translucent mesh.
@@ -729,7 +730,7 @@ impl TranslucentRender {
         Ok(md)
     }
 
-    /// `voltab bench --translucent`: per material, the paper's Table 3 columns at the stage's size and
+    /// `voltab bench --suite translucent`: per material, the paper's Table 3 columns at the stage's size and
     /// at 512 × 512 (pre-processing, single, double + multiple, bounced, rest), memory, the naive traversal against
     /// the two-step one, and the speed-up over path tracing at equal MSE at `reference_width` against
     /// the stage's reference and against a 4096-path one.

@@ -1,4 +1,4 @@
-//! `voltab bench --pop`: the stage's frame → elek2014 Fig. 14's phase times and the isotropic
+//! `voltab bench --suite pop`: the stage's frame → elek2014 Fig. 14's phase times and the isotropic
 //! residuum's speed-up of Sec. 5.4 (Fig. 8) on a thick, nearly conservative medium.
 
 use super::*;
@@ -70,7 +70,7 @@ fn env_residuum_bench(
 }
 
 impl PopRender {
-    /// `voltab bench --pop`: the stage's frame split into elek2014 Fig. 14's phases (median of 5 runs on
+    /// `voltab bench --suite pop`: the stage's frame split into elek2014 Fig. 14's phases (median of 5 runs on
     /// the current rayon pool) with the time per iteration; and the isotropic residuum's speed-up
     /// (Sec. 5.4, Fig. 8) on a thick, nearly conservative cube (`σ_s = 20 /m`, albedo 0.999, g = 0.95,
     /// the preset's grid): converged anisotropic propagation against the switch at Eq. 10's `m'`, with the
@@ -173,7 +173,7 @@ impl PopRender {
         }
         Ok((text, rows))
     }
-    /// `voltab bench --gpu`: the stage's frame with the propagation on the CPU and on `ctx.device`
+    /// `voltab bench --suite gpu`: the stage's frame with the propagation on the CPU and on `ctx.device`
     /// side by side (median of 3 each), the GPU time of every pass kind, and how far the GPU frame's
     /// scattered light is from the CPU's.
     pub fn bench_gpu(
