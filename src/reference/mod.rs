@@ -7,6 +7,7 @@ pub mod beam_adjoint;
 pub mod grid_mc;
 pub mod hg_hp;
 pub mod mitsuba;
+pub mod quadrature;
 pub mod translucent;
 /// Brute-force volumetric path tracer: surface irradiance with volume-to-surface transport.
 pub mod volpath;

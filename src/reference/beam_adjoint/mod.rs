@@ -105,6 +105,7 @@ use rayon::prelude::*;
 
 use crate::physics::hg::{phase, sample_mu};
 use crate::physics::rng::StreamKey;
+use crate::reference::quadrature::gauss_legendre;
 
 /// Smallest distance from the beam axis at which `E_2` is evaluated (it diverges like `1/ρ` on
 /// the axis): [`e2`] and the lobe functions return an error closer than this, the walk skips the
@@ -612,38 +613,6 @@ fn psi_rule() -> &'static [(f64, f64)] {
 fn phi_rule() -> &'static [(f64, f64)] {
     static RULE: OnceLock<Vec<(f64, f64)>> = OnceLock::new();
     RULE.get_or_init(|| gauss_legendre(PHI_NODES))
-}
-
-/// `n`-point Gauss–Legendre rule on `[−1, 1]` as `(node, weight)`: Newton's method on `P_n` from
-/// the asymptotic guesses `cos(π(i + 3/4)/(n + 1/2))`, weights `2/((1 − x²) P_n'(x)²)`.
-fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
-    (0..n)
-        .map(|i| {
-            let mut x = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-            for _ in 0..100 {
-                let (p, dp) = legendre_with_derivative(n, x);
-                let step = p / dp;
-                x -= step;
-                if step.abs() <= 1e-16 {
-                    break;
-                }
-            }
-            let (_, dp) = legendre_with_derivative(n, x);
-            (x, 2.0 / ((1.0 - x * x) * dp * dp))
-        })
-        .collect()
-}
-
-/// `(P_n(x), P_n'(x))` by the three-term recurrence, for `|x| < 1`.
-fn legendre_with_derivative(n: usize, x: f64) -> (f64, f64) {
-    let (mut prev, mut cur) = (1.0, x);
-    for k in 1..n {
-        let k = k as f64;
-        let next = ((2.0 * k + 1.0) * x * cur - k * prev) / (k + 1.0);
-        prev = cur;
-        cur = next;
-    }
-    (cur, n as f64 * (x * cur - prev) / (x * x - 1.0))
 }
 
 #[cfg(test)]

@@ -10,34 +10,9 @@ use super::filter::{self, level_count, level_variances};
 use super::*;
 use crate::scene::Density;
 
-/// Gauss–Legendre nodes and weights on \[−1, 1\] (Newton on `P_n`).
-fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
-    (0..n)
-        .map(|i| {
-            let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-            let mut dp = 1.0;
-            for _ in 0..100 {
-                let (mut p0, mut p1) = (1.0, x);
-                for k in 2..=n {
-                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                    p0 = p1;
-                    p1 = p2;
-                }
-                dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-                let dx = p1 / dp;
-                x -= dx;
-                if dx.abs() < 1e-16 {
-                    break;
-                }
-            }
-            (x, 2.0 / ((1.0 - x * x) * dp * dp))
-        })
-        .collect()
-}
-
 /// `∫₀ᴰ f` by composite 16-point Gauss–Legendre on `panels` panels.
 fn quad(f: impl Fn(f64) -> f64, d: f64, panels: usize) -> f64 {
-    let gl = gauss_legendre(16);
+    let gl = crate::physics::sh::gauss_legendre(16);
     let h = d / panels as f64;
     (0..panels)
         .map(|p| {
