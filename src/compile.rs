@@ -362,12 +362,13 @@ impl TableLines {
     }
 }
 
-/// A progress bar on stderr when `show` and stderr is a terminal; hidden otherwise.
-pub fn progress_bar(show: bool, total: u64) -> ProgressBar {
+/// A progress bar labelled `label` (what it counts) on stderr when `show` and stderr is a terminal;
+/// hidden otherwise.
+pub fn progress_bar(show: bool, total: u64, label: impl Into<std::borrow::Cow<'static, str>>) -> ProgressBar {
     if !show || !std::io::stderr().is_terminal() {
         return ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::hidden());
     }
-    let bar = ProgressBar::new(total);
+    let bar = ProgressBar::new(total).with_message(label);
     if let Ok(style) =
         ProgressStyle::with_template("{spinner} {msg} [{elapsed_precise}] {wide_bar} {pos}/{len} {per_sec} ETA {eta}")
     {

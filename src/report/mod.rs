@@ -130,8 +130,7 @@ pub fn run(p: &ValidatedPipeline, out_dir: &Path, progress: bool) -> Result<Repo
     std::fs::create_dir_all(out_dir).map_err(|e| out_err(out_dir, &e))?;
     let limits = Limits::from_machine();
     let rungs: u64 = p.tables().iter().map(|t| t.def().report_ladder().len() as u64).sum();
-    let bar = progress_bar(progress, rungs);
-    bar.set_message("report: ladder rungs");
+    let bar = progress_bar(progress, rungs, "report: ladder rungs");
     let mut tables = Vec::new();
     for t in p.tables() {
         let mut rows = Vec::new();

@@ -111,8 +111,11 @@ pub fn bake_shard(
     let owner = assign(&units, spec.count);
     let tiles = tiles_per_mode(p, &units);
     let mine: Vec<&Unit> = units.iter().zip(&owner).filter(|(_, s)| **s == spec.index).map(|(u, _)| u).collect();
-    let bar = crate::compile::progress_bar(ctx.progress, mine.iter().map(|u| u.cost).sum());
-    bar.set_message(format!("bake shard {}/{}: texels", spec.index, spec.count));
+    let bar = crate::compile::progress_bar(
+        ctx.progress,
+        mine.iter().map(|u| u.cost).sum(),
+        format!("bake shard {}/{}: texels", spec.index, spec.count),
+    );
     let mut parts = Vec::with_capacity(mine.len());
     let (mut computed, mut reused) = (Vec::new(), Vec::new());
     // One stage prepared at a time (scene, BVH, table, atlas), for all of its tiles in this shard.

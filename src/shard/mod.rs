@@ -381,8 +381,11 @@ pub fn compile_shard(
     let owner = assign(&units, spec.count);
     let mine: Vec<&Unit> = units.iter().zip(&owner).filter(|(_, s)| **s == spec.index).map(|(u, _)| u).collect();
     let total: u64 = mine.iter().map(|u| u.cost).sum();
-    let bar = crate::compile::progress_bar(progress, total);
-    bar.set_message(format!("shard {}/{}: work (cost units)", spec.index, spec.count));
+    let bar = crate::compile::progress_bar(
+        progress,
+        total,
+        format!("shard {}/{}: work (cost units)", spec.index, spec.count),
+    );
     let work = |u: &Unit| -> Result<(PartEntry, bool), ShardError> {
         let t = &p.tables()[u.table];
         let file = part_file(t, u);

@@ -762,8 +762,7 @@ pub fn bake_points(
     progress: bool,
     label: &str,
 ) -> Result<Vec<Estimate>, transport::TransportError> {
-    let bar = crate::compile::progress_bar(progress, points.len() as u64);
-    bar.set_message(format!("bake {label}: texels"));
+    let bar = crate::compile::progress_bar(progress, points.len() as u64, format!("bake {label}: texels"));
     let out: Result<Vec<Vec<Estimate>>, _> = points
         .par_chunks(64)
         .map(|chunk| {

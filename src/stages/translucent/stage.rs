@@ -420,8 +420,11 @@ impl TranslucentRender {
         progress: bool,
     ) -> Result<(render::Frame, render::Prepared), String> {
         let prep = render::prepare(setup, table, &self.point_options(), &self.render_options())?;
-        let bar = crate::compile::progress_bar(progress, cam.height as u64);
-        bar.set_message(format!("translucent frame {}×{}: rows", cam.width, cam.height));
+        let bar = crate::compile::progress_bar(
+            progress,
+            cam.height as u64,
+            format!("translucent frame {}×{}: rows", cam.width, cam.height),
+        );
         let frame = render::render(setup, table, &prep, cam, &self.render_options(), &|n| bar.inc(n))?;
         bar.finish_and_clear();
         Ok((frame, prep))
