@@ -11,7 +11,8 @@ use std::time::Instant;
 
 use crate::compile::{CompileError, CompileOptions, compile, encode_table};
 use crate::container::ContainerError;
-use crate::pipeline::{Limits, ValidatedPipeline};
+use crate::pipeline::Limits;
+use crate::registry::ValidatedPipeline;
 use crate::tables::TableDef;
 
 /// One measured comparison (defined beside the stages, which measure most of them).

@@ -17,8 +17,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::cache::{CacheError, OutputDir, hex};
 use crate::container::{self, ContainerError, EncodeOptions, Header};
+use crate::pipeline::ValidatedTable;
 use crate::pipeline::error::suggestion_help;
-use crate::pipeline::{ValidatedPipeline, ValidatedTable};
+use crate::registry::ValidatedPipeline;
 use crate::tables::{GenStats, GenerateError, Generated, TableDef};
 
 /// How to compile.

@@ -50,6 +50,7 @@ pub mod physics;
 pub mod pipeline;
 pub mod plan;
 pub mod reference;
+pub mod registry;
 pub mod render;
 pub mod report;
 pub mod scene;

@@ -1,7 +1,8 @@
 //! The stability harness: every formula of every table kind driven through a matrix of extreme
 //! inputs (g → ±1 and g = 0, μ and ξ at and next to their ends, tiny and huge orders), each row
 //! stating what a correct result must satisfy. `voltab stability` prints the matrix; the test suite
-//! asserts every row. Later kinds add their rows in their own module and list them in [`rows`].
+//! asserts every row. Each kind keeps its rows in its own module; [`crate::registry::stability_rows`]
+//! lists them all (this module names no kind, so the kinds below and above it can both use it).
 
 use std::fmt;
 
@@ -65,17 +66,4 @@ impl fmt::Display for Row {
             self.expect
         )
     }
-}
-
-/// Every row of every kind.
-pub fn rows() -> Vec<Row> {
-    let mut v = Vec::new();
-    v.extend(crate::tables::phase_hg::stability_rows());
-    v.extend(crate::tables::zh_response::stability_rows());
-    v.extend(crate::tables::ms_lobes::stability_rows());
-    v.extend(crate::tables::pop_preset::stability_rows());
-    v.extend(crate::stages::pop::radial::stability_rows());
-    v.extend(crate::stages::image_fog::medium::stability_rows());
-    v.extend(crate::stages::translucent::render::stability_rows());
-    v
 }

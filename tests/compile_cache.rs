@@ -10,7 +10,8 @@ use std::time::Duration;
 use common::{tempdir, text, voltab, vtabs, write};
 use voltab::compile::{CompileOptions, Status, compile};
 use voltab::container::VtabReader;
-use voltab::pipeline::{Disk, load_and_validate};
+use voltab::pipeline::Disk;
+use voltab::registry::load_and_validate;
 
 const PIPE: &str = "(tables: [
     PhaseHg(id: \"a\", g: [-0.5, 0.0, 0.5], mu_bins: 256, xi_bins: 256),

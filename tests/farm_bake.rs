@@ -8,7 +8,8 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use voltab::compile::{CompileOptions, compile};
-use voltab::pipeline::{Disk, ValidatedPipeline, load_and_validate};
+use voltab::pipeline::Disk;
+use voltab::registry::{ValidatedPipeline, load_and_validate};
 use voltab::render::gpu::Device;
 use voltab::shard::bake::{bake_shard, bake_units, merge_bake};
 use voltab::shard::{ShardError, ShardSpec, compile_shard, merge};

@@ -12,7 +12,8 @@ use std::path::Path;
 use voltab::compile::{CompileOptions, compile};
 use voltab::container::{self, VtabReader};
 use voltab::physics::hg;
-use voltab::pipeline::{Disk, load_and_validate};
+use voltab::pipeline::Disk;
+use voltab::registry::load_and_validate;
 use voltab::tables::phase_hg::PhaseHgTable;
 
 #[test]

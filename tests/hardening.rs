@@ -9,10 +9,11 @@ use std::time::{Duration, Instant};
 
 use common::{run, tempdir, text, write};
 use voltab::container::{END_MAGIC, VtabReader, assemble_unchecked};
-use voltab::pipeline::{DiagnosticKind as K, Disk, PipelineError, load_and_validate};
+use voltab::pipeline::{DiagnosticKind as K, Disk, PipelineError};
+use voltab::registry::load_and_validate;
 use voltab::tables::TableDef;
 
-fn check_text(dir: &Path, body: &str) -> Result<voltab::pipeline::ValidatedPipeline, PipelineError> {
+fn check_text(dir: &Path, body: &str) -> Result<voltab::registry::ValidatedPipeline, PipelineError> {
     let p = write(dir, "p.ron", body);
     load_and_validate(&p, &Disk)
 }
@@ -251,7 +252,7 @@ fn plot_phase_g_missing_from_its_table_fails_check() {
 /// included studio-base.ron does not declare).
 #[test]
 fn the_reference_example_pipeline_checks() {
-    let md = voltab::pipeline::schema::reference_markdown();
+    let md = voltab::registry::reference_markdown();
     let start = md.find("```ron\n").expect("example") + 7;
     let end = start + md[start..].find("```").expect("end of example");
     let d = tempdir();

@@ -6,11 +6,13 @@ mod common;
 use std::path::Path;
 
 use common::{tempdir, text, write};
-use voltab::pipeline::{DiagnosticKind as K, Disk, Limits, PipelineError, load_and_validate, parse::load, validate};
+use voltab::pipeline::{DiagnosticKind as K, Disk, Limits, PipelineError};
+use voltab::registry::load_and_validate;
+use voltab::registry::{load, validate};
 use voltab::tables::TableDef;
 use voltab::tables::phase_hg::GValues;
 
-fn check(dir: &Path, text: &str) -> Result<voltab::pipeline::ValidatedPipeline, PipelineError> {
+fn check(dir: &Path, text: &str) -> Result<voltab::registry::ValidatedPipeline, PipelineError> {
     let p = write(dir, "p.ron", text);
     load_and_validate(&p, &Disk)
 }
@@ -167,7 +169,7 @@ fn several_problems_are_reported_together() {
     assert!(s.ends_with("2 problems found"), "{s}");
 }
 
-fn phase(p: &voltab::pipeline::ValidatedPipeline, id: &str) -> voltab::tables::phase_hg::PhaseHg {
+fn phase(p: &voltab::registry::ValidatedPipeline, id: &str) -> voltab::tables::phase_hg::PhaseHg {
     match p.table(id).unwrap().def() {
         TableDef::PhaseHg(h) => h.clone(),
         #[allow(unreachable_patterns)]

@@ -3,8 +3,8 @@
 #[test]
 fn committed_schema_matches_the_code() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("schemas");
-    let json = format!("{}\n", serde_json::to_string_pretty(&voltab::pipeline::schema::json_schema()).unwrap());
-    let md = voltab::pipeline::schema::reference_markdown();
+    let json = format!("{}\n", serde_json::to_string_pretty(&voltab::registry::json_schema()).unwrap());
+    let md = voltab::registry::reference_markdown();
     let stale = |name: &str, want: &str| std::fs::read_to_string(root.join(name)).ok().as_deref() != Some(want);
     assert!(
         !stale("pipeline.schema.json", &json) && !stale("reference.md", &md),
@@ -14,7 +14,7 @@ fn committed_schema_matches_the_code() {
 
 #[test]
 fn schema_documents_every_field_with_default_unit_and_range() {
-    let s = voltab::pipeline::schema::json_schema();
+    let s = voltab::registry::json_schema();
     let props = &s["$defs"]["PhaseHgRaw"]["properties"];
     for f in voltab::tables::phase_hg::PhaseHgRaw::FIELDS {
         let p = &props[f.name];
@@ -34,8 +34,8 @@ fn schema_documents_every_field_with_default_unit_and_range() {
 #[test]
 fn every_stage_kind_is_documented() {
     use voltab::stages::{bake, god_rays, image_fog, pop, translucent};
-    let s = voltab::pipeline::schema::json_schema();
-    let md = voltab::pipeline::schema::reference_markdown();
+    let s = voltab::registry::json_schema();
+    let md = voltab::registry::reference_markdown();
     let kinds: [(&str, &[voltab::pipeline::params::FieldDoc]); 5] = [
         (bake::BakeLightmapsRaw::KIND, bake::BakeLightmapsRaw::FIELDS),
         (god_rays::EpipolarShadowsRaw::KIND, god_rays::EpipolarShadowsRaw::FIELDS),

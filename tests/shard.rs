@@ -8,7 +8,8 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use voltab::compile::{CompileOptions, Status, compile};
-use voltab::pipeline::{Disk, ValidatedPipeline, load_and_validate};
+use voltab::pipeline::Disk;
+use voltab::registry::{ValidatedPipeline, load_and_validate};
 use voltab::shard::{ShardError, ShardSpec, compile_shard, merge};
 
 fn fixture() -> PathBuf {

@@ -2,7 +2,7 @@
 
 #[test]
 fn every_formula_survives_extreme_inputs() {
-    let rows = voltab::stability::rows();
+    let rows = voltab::registry::stability_rows();
     let failed: Vec<String> = rows.iter().filter(|r| !r.ok()).map(ToString::to_string).collect();
     assert!(failed.is_empty(), "{} of {} rows failed:\n{}", failed.len(), rows.len(), failed.join("\n"));
     // PhaseHg: 11 g × (5 μ × 2 + 3 + 5 ξ + 4) + 2 whole-table rows. ZhResponse: 3 emitters × (4 media ×

@@ -9,7 +9,8 @@ mod mem;
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use voltab::pipeline::{Limits, Sources, parse::load, validate};
+use voltab::pipeline::{Limits, Sources};
+use voltab::registry::{load, validate};
 
 #[global_allocator]
 static ALLOC: mem::Counting = mem::Counting;

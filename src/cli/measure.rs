@@ -147,7 +147,7 @@ pub fn bench(a: BenchArgs) -> Result<ExitCode> {
 /// `voltab stability`: every formula on extreme inputs; a non-zero exit when one fails.
 pub fn stability(a: StabilityArgs) -> Result<ExitCode> {
     let StabilityArgs { all } = a;
-    let rows = voltab::stability::rows();
+    let rows = voltab::registry::stability_rows();
     let failed = rows.iter().filter(|r| !r.ok()).count();
     for r in rows.iter().filter(|r| all || !r.ok()) {
         println!("{r}");

@@ -21,7 +21,8 @@ use anyhow::{Context, Result, bail};
 use args::*;
 use voltab::compile::{CompileOptions, compile, summary_line};
 use voltab::container::{self, VtabReader};
-use voltab::pipeline::{self, Disk, Embedded, Sources, ValidatedPipeline};
+use voltab::pipeline::{self, Disk, Embedded, Sources, StageKind};
+use voltab::registry::ValidatedPipeline;
 use voltab::scene::cache::SceneCache;
 
 /// Runs a command (`None`: the main job, the default pipeline on the bundled scenes).
@@ -79,7 +80,7 @@ pub(super) fn load(path: &Path) -> Result<ValidatedPipeline> {
         &Disk
     };
     // Diagnostics are complete messages; print them as they are.
-    pipeline::load_and_validate(path, sources).map_err(|e| anyhow::anyhow!("{e}"))
+    voltab::registry::load_and_validate(path, sources).map_err(|e| anyhow::anyhow!("{e}"))
 }
 
 /// The bundled scenes (`scenes/*.gltf`, sorted) when run from a checkout: the main job compiles what they

@@ -9,7 +9,7 @@ pub fn check(a: CheckArgs) -> Result<ExitCode> {
     let p = load(&pipeline)?;
     if dump_json {
         let text = if pipeline.exists() { std::fs::read_to_string(&pipeline)? } else { Embedded.read(&pipeline)? };
-        let file: pipeline::PipelineFile = ron::Options::default()
+        let file: voltab::registry::PipelineFile = ron::Options::default()
             .with_default_extension(
                 ron::extensions::Extensions::IMPLICIT_SOME | ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES,
             )
@@ -108,8 +108,8 @@ pub fn diff(a: DiffArgs) -> Result<ExitCode> {
 pub fn schema(a: SchemaArgs) -> Result<ExitCode> {
     let SchemaArgs { dir, check } = a;
     let files = [
-        ("pipeline.schema.json", format!("{}\n", serde_json::to_string_pretty(&pipeline::schema::json_schema())?)),
-        ("reference.md", pipeline::schema::reference_markdown()),
+        ("pipeline.schema.json", format!("{}\n", serde_json::to_string_pretty(&voltab::registry::json_schema())?)),
+        ("reference.md", voltab::registry::reference_markdown()),
         (
             "VOLTAB_participating_media.schema.json",
             format!("{}\n", serde_json::to_string_pretty(&voltab::scene::gltf_import::vendor_schema())?),

@@ -7,6 +7,7 @@
 //! `Validated*` types the rest of voltab accepts.
 
 pub mod error;
+pub mod kinds;
 pub mod locate;
 pub mod params;
 pub mod parse;
@@ -14,5 +15,6 @@ pub mod schema;
 pub mod validate;
 
 pub use error::{Diagnostic, DiagnosticKind, Loc, PipelineError};
+pub use kinds::{KindDoc, StageKind, StageKinds};
 pub use parse::{Disk, Embedded, PipelineFile, Sources};
 pub use validate::{Limits, ValidatedPipeline, ValidatedStage, ValidatedTable, load_and_validate, validate};

@@ -10,14 +10,15 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::error::{Diagnostic, DiagnosticKind as K, Loc, PipelineError, suggestion_help};
+use super::kinds::StageKinds;
 use super::locate::Masked;
-use crate::stages::StageDecl;
 use crate::tables::TableDecl;
 
-/// One pipeline file as written.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct PipelineFile {
+/// One pipeline file as written, with stage entries of type `S` (the registry's stage kinds).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields, bound(deserialize = "S: Deserialize<'de>", serialize = "S: Serialize"))]
+#[schemars(rename = "PipelineFile")]
+pub struct PipelineFile<S> {
     /// Other pipeline files (paths relative to this file) whose presets, tables and stages are
     /// loaded first, e.g. a studio-wide base pipeline.
     #[serde(default)]
@@ -33,7 +34,8 @@ pub struct PipelineFile {
     pub overrides: BTreeMap<String, TableDecl>,
     /// Consumers of the tables (run after compiling by `voltab run`).
     #[serde(default)]
-    pub stages: Vec<StageDecl>,
+    #[schemars(extend("default" = []))]
+    pub stages: Vec<S>,
 }
 
 /// A source file kept for locating errors.
@@ -143,8 +145,8 @@ fn normalize_components(p: &Path) -> PathBuf {
 }
 
 /// All entries of a pipeline and its includes, each tagged with its file index.
-#[derive(Debug, Default)]
-pub struct Loaded {
+#[derive(Debug)]
+pub struct Loaded<S> {
     /// Source files, in load order.
     pub files: Vec<SourceFile>,
     /// (name, decl, file).
@@ -154,7 +156,7 @@ pub struct Loaded {
     /// (table id, decl, file).
     pub overrides: Vec<(String, TableDecl, usize)>,
     /// (decl, file).
-    pub stages: Vec<(StageDecl, usize)>,
+    pub stages: Vec<(S, usize)>,
 }
 
 fn ron_options() -> ron::Options {
@@ -164,18 +166,24 @@ fn ron_options() -> ron::Options {
 }
 
 /// Loads `path` and everything it includes.
-pub fn load(path: &Path, sources: &dyn Sources) -> Result<Loaded, PipelineError> {
-    let mut loaded = Loaded::default();
+pub fn load<S: StageKinds>(path: &Path, sources: &dyn Sources) -> Result<Loaded<S>, PipelineError> {
+    let mut loaded = Loaded {
+        files: Vec::new(),
+        presets: Vec::new(),
+        tables: Vec::new(),
+        overrides: Vec::new(),
+        stages: Vec::new(),
+    };
     let mut stack = Vec::new();
     load_into(&normalize(path), None, sources, &mut loaded, &mut stack)?;
     Ok(loaded)
 }
 
-fn load_into(
+fn load_into<S: StageKinds>(
     path: &Path,
     included_from: Option<Loc>,
     sources: &dyn Sources,
-    out: &mut Loaded,
+    out: &mut Loaded<S>,
     stack: &mut Vec<PathBuf>,
 ) -> Result<(), PipelineError> {
     if stack.iter().any(|p| p == path) {
@@ -190,8 +198,8 @@ fn load_into(
         return Ok(()); // already loaded through another include (diamond): load once
     }
     let text = sources.read(path).map_err(|e| PipelineError::one(read_diagnostic(path, included_from.clone(), &e)))?;
-    let file: PipelineFile =
-        ron_options().from_str(&text).map_err(|e| PipelineError::one(ron_diagnostic(path, &text, &e)))?;
+    let file: PipelineFile<S> =
+        ron_options().from_str(&text).map_err(|e| PipelineError::one(ron_diagnostic(path, &text, &e, S::ENUM_NAME)))?;
     let masked = Masked::new(&text);
     let this = SourceFile { path: path.to_path_buf(), masked };
     stack.push(path.to_path_buf());
@@ -228,8 +236,9 @@ fn read_diagnostic(path: &Path, included_from: Option<Loc>, e: &std::io::Error) 
     Diagnostic::new(K::Io, included_from, format!("cannot read {what} {}: {e}", path.display())).with_help(help)
 }
 
-/// Turns a RON error into a diagnostic with a location and a hint.
-fn ron_diagnostic(path: &Path, text: &str, e: &ron::error::SpannedError) -> Diagnostic {
+/// Turns a RON error into a diagnostic with a location and a hint (`stage_enum`: the Rust name of
+/// the stage-entry enum, which RON names in an unknown-variant error).
+fn ron_diagnostic(path: &Path, text: &str, e: &ron::error::SpannedError, stage_enum: &str) -> Diagnostic {
     use ron::error::Error as E;
     let loc = Some(Loc { file: path.to_path_buf(), line: e.span.start.line, col: e.span.start.col });
     match &e.code {
@@ -243,7 +252,7 @@ fn ron_diagnostic(path: &Path, text: &str, e: &ron::error::SpannedError) -> Diag
             let names: Vec<&str> = expected.to_vec();
             let (kind, what) = match outer.as_deref() {
                 Some("TableDecl") => (K::UnknownKind, "table kind"),
-                Some("StageDecl") => (K::UnknownKind, "stage kind"),
+                Some(o) if o == stage_enum => (K::UnknownKind, "stage kind"),
                 _ => (K::WrongType, "value"),
             };
             Diagnostic::new(kind, loc, format!("unknown {what} `{found}`"))

@@ -5,21 +5,12 @@
 
 use serde_json::{Value, json};
 
-use super::params::FieldDoc;
+use super::kinds::{KindDoc, StageKinds};
 use super::parse::PipelineFile;
-use crate::stages::bake::{BakeLightmaps, BakeLightmapsRaw};
-use crate::stages::god_rays::{EpipolarShadows, EpipolarShadowsRaw};
-use crate::stages::image_fog::{ImageFogRaw, ImageFogStage};
-use crate::stages::plot_phase::{PlotPhase, PlotPhaseRaw};
-use crate::stages::pop::{PopRender, PopRenderRaw};
-use crate::stages::translucent::{TranslucentRender, TranslucentRenderRaw};
 use crate::tables::ms_lobes::{MsLobes, MsLobesRaw};
 use crate::tables::phase_hg::{PhaseHg, PhaseHgRaw};
 use crate::tables::pop_preset::{PopPreset, PopPresetRaw};
 use crate::tables::zh_response::{ZhResponse, ZhResponseRaw};
-
-/// (kind, what it is, fields, defaults) of one kind.
-type KindDoc = (&'static str, &'static str, &'static [FieldDoc], Vec<(&'static str, Value)>);
 
 /// Every table kind.
 fn table_kinds() -> Vec<KindDoc> {
@@ -51,40 +42,13 @@ fn table_kinds() -> Vec<KindDoc> {
     ]
 }
 
-/// Same for stage kinds: every kind the pipeline accepts, described by its declaration's doc comment.
-fn stage_kinds() -> Vec<KindDoc> {
-    vec![
-        (
-            PlotPhaseRaw::KIND,
-            "Plots a PhaseHg table's phase functions (log scale over angle) to a PNG, loading only the g slices it plots.",
-            PlotPhaseRaw::FIELDS,
-            PlotPhase::defaults_json(),
-        ),
-        (BakeLightmapsRaw::KIND, BakeLightmapsRaw::ABOUT, BakeLightmapsRaw::FIELDS, BakeLightmaps::defaults_json()),
-        (
-            EpipolarShadowsRaw::KIND,
-            EpipolarShadowsRaw::ABOUT,
-            EpipolarShadowsRaw::FIELDS,
-            EpipolarShadows::defaults_json(),
-        ),
-        (ImageFogRaw::KIND, ImageFogRaw::ABOUT, ImageFogRaw::FIELDS, ImageFogStage::defaults_json()),
-        (
-            TranslucentRenderRaw::KIND,
-            TranslucentRenderRaw::ABOUT,
-            TranslucentRenderRaw::FIELDS,
-            TranslucentRender::defaults_json(),
-        ),
-        (PopRenderRaw::KIND, PopRenderRaw::ABOUT, PopRenderRaw::FIELDS, PopRender::defaults_json()),
-    ]
-}
-
-/// JSON Schema of a pipeline file.
-pub fn json_schema() -> Value {
-    let mut schema = serde_json::to_value(schemars::schema_for!(PipelineFile)).unwrap_or(Value::Null);
+/// JSON Schema of a pipeline file whose stage entries are `S`.
+pub fn json_schema<S: StageKinds>() -> Value {
+    let mut schema = serde_json::to_value(schemars::schema_for!(PipelineFile<S>)).unwrap_or(Value::Null);
     schema["title"] = json!("voltab pipeline");
     schema["description"] =
         json!("A voltab pipeline file (RON). Generated from the Rust types by `voltab schema --write`; do not edit.");
-    for (kind, _, fields, defaults) in table_kinds().into_iter().chain(stage_kinds()) {
+    for (kind, _, fields, defaults) in table_kinds().into_iter().chain(S::docs()) {
         let def_name = format!("{kind}Raw");
         let Some(props) =
             schema.get_mut("$defs").and_then(|d| d.get_mut(&def_name)).and_then(|d| d.get_mut("properties"))
@@ -104,8 +68,8 @@ pub fn json_schema() -> Value {
     schema
 }
 
-/// The human reference page.
-pub fn reference_markdown() -> String {
+/// The human reference page of a pipeline file whose stage entries are `S`.
+pub fn reference_markdown<S: StageKinds>() -> String {
     let mut s = String::new();
     s.push_str("# voltab pipeline reference\n\n");
     s.push_str("Generated from the code by `voltab schema --write`; a test fails when it is out of date. ");
@@ -118,7 +82,7 @@ pub fn reference_markdown() -> String {
     s.push_str("- Phase functions are normalised over the sphere: the integral of f over all directions is 1 (unit 1/sr). mu = cos(theta) is the cosine between the incident propagation direction and the scattered direction; g is the mean cosine.\n");
     s.push_str("- F_hg(mu, g) (elek2014) is the cumulative per unit azimuth, 1/rad: 2 pi F_hg(mu, g) is the probability that the scattering cosine is at most mu.\n");
     s.push_str("- ZH coefficients use real-SH normalisation y_l^0 = sqrt((2l+1)/(4 pi)) P_l: the HG lobe's coefficients are sqrt((2l+1)/(4 pi)) g^l.\n\n");
-    for (title, kinds) in [("Table kinds", table_kinds()), ("Stage kinds", stage_kinds())] {
+    for (title, kinds) in [("Table kinds", table_kinds()), ("Stage kinds", S::docs())] {
         s.push_str(&format!("## {title}\n\n"));
         for (kind, about, fields, defaults) in kinds {
             let about = about.split_whitespace().collect::<Vec<_>>().join(" ");

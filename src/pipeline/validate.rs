@@ -9,8 +9,8 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use super::error::{Diagnostic, DiagnosticKind as K, Loc, PipelineError, suggestion_help};
+use super::kinds::{StageKind, StageKinds};
 use super::parse::{Loaded, Sources, load};
-use crate::stages::StageDef;
 use crate::tables::{TableDecl, TableDef};
 
 /// Resource limits applied during validation.
@@ -65,24 +65,24 @@ impl ValidatedTable {
     }
 }
 
-/// A stage that passed validation.
+/// A stage that passed validation (`D`: the registry's resolved stage definition).
 #[derive(Debug, Clone)]
-pub struct ValidatedStage {
+pub struct ValidatedStage<D> {
     id: String,
-    def: StageDef,
+    def: D,
 }
 
-impl ValidatedStage {
+impl<D: StageKind> ValidatedStage<D> {
     /// Unique id.
     pub fn id(&self) -> &str {
         &self.id
     }
     /// Resolved definition.
-    pub fn def(&self) -> &StageDef {
+    pub fn def(&self) -> &D {
         &self.def
     }
     /// The same stage with another definition, revalidated.
-    pub fn with_def(&self, def: StageDef) -> Result<Self, String> {
+    pub fn with_def(&self, def: D) -> Result<Self, String> {
         if let Some(i) = def.validate().first() {
             return Err(format!("{}: {}", i.message, i.help));
         }
@@ -90,15 +90,15 @@ impl ValidatedStage {
     }
 }
 
-/// A whole pipeline that passed validation.
+/// A whole pipeline that passed validation (`D`: the registry's resolved stage definition).
 #[derive(Debug, Clone)]
-pub struct ValidatedPipeline {
+pub struct ValidatedPipeline<D> {
     path: PathBuf,
     tables: Vec<ValidatedTable>,
-    stages: Vec<ValidatedStage>,
+    stages: Vec<ValidatedStage<D>>,
 }
 
-impl ValidatedPipeline {
+impl<D: StageKind> ValidatedPipeline<D> {
     /// The root pipeline file.
     pub fn path(&self) -> &Path {
         &self.path
@@ -108,7 +108,7 @@ impl ValidatedPipeline {
         &self.tables
     }
     /// Stages in declaration order.
-    pub fn stages(&self) -> &[ValidatedStage] {
+    pub fn stages(&self) -> &[ValidatedStage<D>] {
         &self.stages
     }
     /// A table by id.
@@ -122,7 +122,7 @@ impl ValidatedPipeline {
     }
 
     /// A pipeline of the given tables and stages (used by the scene planner for pruned pipelines).
-    pub fn with_parts(&self, tables: Vec<ValidatedTable>, stages: Vec<ValidatedStage>) -> Self {
+    pub fn with_parts(&self, tables: Vec<ValidatedTable>, stages: Vec<ValidatedStage<D>>) -> Self {
         Self { path: self.path.clone(), tables, stages }
     }
 }
@@ -142,8 +142,11 @@ impl ValidatedTable {
 }
 
 /// Loads and validates a pipeline file with the machine's limits.
-pub fn load_and_validate(path: &Path, sources: &dyn Sources) -> Result<ValidatedPipeline, PipelineError> {
-    validate(path, load(path, sources)?, &Limits::from_machine())
+pub fn load_and_validate<S: StageKinds>(
+    path: &Path,
+    sources: &dyn Sources,
+) -> Result<ValidatedPipeline<S::Def>, PipelineError> {
+    validate(path, load::<S>(path, sources)?, &Limits::from_machine())
 }
 
 /// Ids are used as file names: keep them portable and free of path separators.
@@ -155,7 +158,11 @@ fn valid_id(id: &str) -> bool {
 }
 
 /// Validates loaded entries.
-pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipeline, PipelineError> {
+pub fn validate<S: StageKinds>(
+    root: &Path,
+    l: Loaded<S>,
+    limits: &Limits,
+) -> Result<ValidatedPipeline<S::Def>, PipelineError> {
     let mut diags = Vec::new();
     let entry_loc =
         |file: usize, id: &str| l.files[file].masked.find_key_string("id", id, 0).map(|o| l.files[file].loc(o));
@@ -424,8 +431,11 @@ pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipe
                 Some(_) => {}
             }
         }
-        if let Some(d) = plot_g_not_in_table(&def, &validated, id) {
-            diags.push(Diagnostic { loc: field_loc(*file, id, "g").or_else(|| loc.clone()), ..d });
+        for i in def.check_tables(id, &|t| validated.get(t).map(|t| t.def.clone())) {
+            diags.push(
+                Diagnostic::new(K::DanglingReference, field_loc(*file, id, i.field).or_else(|| loc.clone()), i.message)
+                    .with_help(i.help),
+            );
             bad = true;
         }
         for i in def.validate() {
@@ -449,24 +459,6 @@ pub fn validate(root: &Path, l: Loaded, limits: &Limits) -> Result<ValidatedPipe
     } else {
         Err(PipelineError { diagnostics: diags })
     }
-}
-
-/// A `PlotPhase` stage's `g` must name g values of its table (matched within 1e-9, as the table
-/// reader matches them): found at `check`, not only when `run` opens the table (issue 37).
-fn plot_g_not_in_table(def: &StageDef, tables: &HashMap<&str, &ValidatedTable>, id: &str) -> Option<Diagnostic> {
-    let StageDef::PlotPhase(p) = def else { return None };
-    let TableDef::PhaseHg(t) = tables.get(p.table.as_str())?.def() else { return None };
-    let have = t.g.values();
-    let missing = p.g.iter().find(|g| !have.iter().any(|x| (*x - **g).abs() <= 1e-9))?;
-    let list: Vec<String> = have.iter().take(32).map(|g| format!("{g}")).collect();
-    Some(
-        Diagnostic::new(
-            K::DanglingReference,
-            None,
-            format!("stage \"{id}\" plots g = {missing}, which table \"{}\" does not hold", p.table),
-        )
-        .with_help(format!("use g values of the table: {}", list.join(", "))),
-    )
 }
 
 fn set_preset(d: &mut TableDecl, p: Option<String>) {

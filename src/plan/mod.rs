@@ -27,7 +27,8 @@ use std::borrow::Borrow;
 
 use serde::Serialize;
 
-use crate::pipeline::{Limits, ValidatedPipeline, ValidatedStage, ValidatedTable};
+use crate::pipeline::{Limits, ValidatedTable};
+use crate::registry::{ValidatedPipeline, ValidatedStage};
 use crate::scene::{Boundary, Density, LightKind, Scene, Surface};
 use crate::stages::StageDef;
 use crate::tables::TableDef;

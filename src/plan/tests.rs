@@ -1,7 +1,8 @@
 use std::path::Path;
 
 use super::*;
-use crate::pipeline::{Disk, load_and_validate};
+use crate::pipeline::Disk;
+use crate::registry::load_and_validate;
 use crate::scene::fixtures::{fog_room, translucent};
 use crate::scene::{Density, Light};
 

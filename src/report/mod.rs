@@ -15,7 +15,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::cache::write_atomic;
 use crate::compile::{encode_table, progress_bar};
-use crate::pipeline::{Limits, ValidatedPipeline};
+use crate::pipeline::Limits;
+use crate::registry::ValidatedPipeline;
 use crate::tables::Generated;
 
 /// One rung of one table's ladder.

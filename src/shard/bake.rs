@@ -24,7 +24,7 @@ use super::{
     encode_part, pipeline_key, reusable,
 };
 use crate::cache::{OutputDir, write_atomic};
-use crate::pipeline::ValidatedPipeline;
+use crate::registry::ValidatedPipeline;
 use crate::stages::bake::{BakeLightmaps, TILE_TEXELS, TileBaker};
 use crate::stages::{StageContext, StageDef, StageError, StageOutcome};
 

@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use super::{Payload, Unit, assemble_table, compile_units, decode_part, encode_part};
 use crate::compile::build_table;
-use crate::pipeline::ValidatedPipeline;
+use crate::registry::ValidatedPipeline;
 use crate::stages::BenchRow;
 use crate::tables::TableDef;
 

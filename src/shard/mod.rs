@@ -37,7 +37,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::cache::{CacheError, OutputDir, write_atomic};
 use crate::compile::{CompileError, Sidecar, Status, TableResult, build_table};
-use crate::pipeline::{ValidatedPipeline, ValidatedTable};
+use crate::pipeline::ValidatedTable;
+use crate::registry::ValidatedPipeline;
 use crate::tables::{GenerateError, UnitPart};
 
 /// The manifest's file name inside a shard folder.

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use super::{Job, MANIFEST, ShardError, ShardSpec, pipeline_key, read_manifest};
-use crate::pipeline::ValidatedPipeline;
+use crate::registry::ValidatedPipeline;
 use crate::stages::{StageContext, StageDef};
 
 /// What to write.

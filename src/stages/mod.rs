@@ -17,7 +17,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::tables::FieldIssue;
+use crate::pipeline::kinds::{KindDoc, StageKind, StageKinds};
+use crate::tables::{FieldIssue, TableDef};
 
 /// The stages' own benchmarks, one per `voltab bench --suite` (`bake`, `effects`, `translucent`,
 /// `pop`).
@@ -145,9 +146,10 @@ pub enum StageError {
     },
 }
 
-impl StageDecl {
-    /// Kind name as written in RON.
-    pub fn kind(&self) -> &'static str {
+impl StageKinds for StageDecl {
+    type Def = StageDef;
+    const ENUM_NAME: &'static str = "StageDecl";
+    fn kind(&self) -> &'static str {
         match self {
             StageDecl::PlotPhase(_) => plot_phase::PlotPhaseRaw::KIND,
             StageDecl::BakeLightmaps(_) => bake::BakeLightmapsRaw::KIND,
@@ -157,8 +159,7 @@ impl StageDecl {
             StageDecl::PopRender(_) => pop::PopRenderRaw::KIND,
         }
     }
-    /// The entry's id.
-    pub fn id(&self) -> Option<&str> {
+    fn id(&self) -> Option<&str> {
         match self {
             StageDecl::PlotPhase(r) => r.id.as_deref(),
             StageDecl::BakeLightmaps(r) => r.id.as_deref(),
@@ -168,8 +169,7 @@ impl StageDecl {
             StageDecl::PopRender(r) => r.id.as_deref(),
         }
     }
-    /// Fills defaults.
-    pub fn resolve(&self) -> StageDef {
+    fn resolve(&self) -> StageDef {
         match self {
             StageDecl::PlotPhase(r) => StageDef::PlotPhase(r.resolve()),
             StageDecl::BakeLightmaps(r) => StageDef::BakeLightmaps(r.resolve()),
@@ -179,11 +179,41 @@ impl StageDecl {
             StageDecl::PopRender(r) => StageDef::PopRender(r.resolve()),
         }
     }
+    fn docs() -> Vec<KindDoc> {
+        use bake::{BakeLightmaps, BakeLightmapsRaw};
+        use god_rays::{EpipolarShadows, EpipolarShadowsRaw};
+        use image_fog::{ImageFogRaw, ImageFogStage};
+        use plot_phase::{PlotPhase, PlotPhaseRaw};
+        use pop::{PopRender, PopRenderRaw};
+        use translucent::{TranslucentRender, TranslucentRenderRaw};
+        vec![
+            (
+                PlotPhaseRaw::KIND,
+                "Plots a PhaseHg table's phase functions (log scale over angle) to a PNG, loading only the g slices it plots.",
+                PlotPhaseRaw::FIELDS,
+                PlotPhase::defaults_json(),
+            ),
+            (BakeLightmapsRaw::KIND, BakeLightmapsRaw::ABOUT, BakeLightmapsRaw::FIELDS, BakeLightmaps::defaults_json()),
+            (
+                EpipolarShadowsRaw::KIND,
+                EpipolarShadowsRaw::ABOUT,
+                EpipolarShadowsRaw::FIELDS,
+                EpipolarShadows::defaults_json(),
+            ),
+            (ImageFogRaw::KIND, ImageFogRaw::ABOUT, ImageFogRaw::FIELDS, ImageFogStage::defaults_json()),
+            (
+                TranslucentRenderRaw::KIND,
+                TranslucentRenderRaw::ABOUT,
+                TranslucentRenderRaw::FIELDS,
+                TranslucentRender::defaults_json(),
+            ),
+            (PopRenderRaw::KIND, PopRenderRaw::ABOUT, PopRenderRaw::FIELDS, PopRender::defaults_json()),
+        ]
+    }
 }
 
-impl StageDef {
-    /// Kind name.
-    pub fn kind(&self) -> &'static str {
+impl StageKind for StageDef {
+    fn kind(&self) -> &'static str {
         match self {
             StageDef::PlotPhase(_) => plot_phase::PlotPhaseRaw::KIND,
             StageDef::BakeLightmaps(_) => bake::BakeLightmapsRaw::KIND,
@@ -193,8 +223,7 @@ impl StageDef {
             StageDef::PopRender(_) => pop::PopRenderRaw::KIND,
         }
     }
-    /// (field, referenced table id, required table kind) for every table this stage reads.
-    pub fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
+    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
         match self {
             StageDef::PlotPhase(p) => vec![("table", p.table.clone(), crate::tables::phase_hg::PhaseHgRaw::KIND)],
             StageDef::BakeLightmaps(b) => b
@@ -214,8 +243,7 @@ impl StageDef {
             StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) => Vec::new(),
         }
     }
-    /// Range checks.
-    pub fn validate(&self) -> Vec<FieldIssue> {
+    fn validate(&self) -> Vec<FieldIssue> {
         match self {
             StageDef::PlotPhase(p) => p.validate(),
             StageDef::BakeLightmaps(b) => b.validate(),
@@ -225,6 +253,15 @@ impl StageDef {
             StageDef::PopRender(p) => p.validate(),
         }
     }
+    fn check_tables(&self, id: &str, table: &dyn Fn(&str) -> Option<TableDef>) -> Vec<FieldIssue> {
+        match self {
+            StageDef::PlotPhase(p) => table(&p.table).and_then(|t| p.check_table(id, &t)).into_iter().collect(),
+            _ => Vec::new(),
+        }
+    }
+}
+
+impl StageDef {
     /// Scene files the stage reads, resolved against `base_dir` (the pipeline's folder).
     pub fn scenes(&self, base_dir: &Path) -> Vec<PathBuf> {
         match self {

@@ -8,8 +8,8 @@ use std::path::Path;
 
 use super::{StageError, StageOutcome, check_output_name};
 use crate::report::plot::{Plot, Scale, Series, write_png};
-use crate::tables::FieldIssue;
 use crate::tables::phase_hg::PhaseHgTable;
+use crate::tables::{FieldIssue, TableDef};
 
 crate::declare_params! {
     /// Plot the phase functions of a PhaseHg table.
@@ -44,6 +44,20 @@ impl PlotPhase {
             });
         }
         v
+    }
+
+    /// Every plotted g must be a g value of the table (matched within 1e-9, as the table reader
+    /// matches them): found at `check`, not only when `run` opens the table (issue 37).
+    pub fn check_table(&self, id: &str, table: &TableDef) -> Option<FieldIssue> {
+        let TableDef::PhaseHg(t) = table else { return None };
+        let have = t.g.values();
+        let missing = self.g.iter().find(|g| !have.iter().any(|x| (*x - **g).abs() <= 1e-9))?;
+        let list: Vec<String> = have.iter().take(32).map(|g| format!("{g}")).collect();
+        Some(FieldIssue {
+            field: "g",
+            message: format!("stage \"{id}\" plots g = {missing}, which table \"{}\" does not hold", self.table),
+            help: format!("use g values of the table: {}", list.join(", ")),
+        })
     }
 
     /// Loads the wanted slices and writes the plot.
