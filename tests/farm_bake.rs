@@ -97,7 +97,7 @@ fn a_bake_merged_from_tiles_writes_the_lightmaps_one_machine_writes() {
     let local = d.path().join("local");
     compile(&p, &CompileOptions { out_dir: local.clone(), ..Default::default() }).unwrap();
     for s in p.stages() {
-        s.def().run(s.id(), &ctx(&local, &base)).unwrap();
+        s.def().stage().run(s.id(), &ctx(&local, &base)).unwrap();
     }
     let want = outputs(&local.join("farm_bake"));
     let names: Vec<&str> = want.iter().map(|(n, _)| n.as_str()).collect();

@@ -38,7 +38,7 @@ pub fn run(a: RunArgs) -> Result<ExitCode> {
     let ctx =
         voltab::stages::StageContext { out_dir: &out, base_dir: &base, progress, device: &device, scenes: &cache };
     for s in p.stages() {
-        let missing: Vec<PathBuf> = s.def().scenes(&base).into_iter().filter(|f| !f.exists()).collect();
+        let missing: Vec<PathBuf> = s.def().stage().scenes(&base).into_iter().filter(|f| !f.exists()).collect();
         if !missing.is_empty() && !pipeline.exists() {
             // The built-in default pipeline outside a checkout: its bundled scenes are not here.
             eprintln!(
@@ -48,7 +48,7 @@ pub fn run(a: RunArgs) -> Result<ExitCode> {
             );
             continue;
         }
-        stage_results.push((s.id().to_owned(), s.def().run(s.id(), &ctx)?));
+        stage_results.push((s.id().to_owned(), s.def().stage().run(s.id(), &ctx)?));
     }
     if json {
         println!(

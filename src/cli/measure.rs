@@ -25,7 +25,7 @@ pub fn report(a: ReportArgs) -> Result<ExitCode> {
             scenes: &cache,
         };
         for s in p.stages() {
-            if let Some(md) = s.def().report(s.id(), &ctx, &out)? {
+            if let Some(md) = s.def().stage().report(s.id(), &ctx, &out)? {
                 print!("{md}");
                 println!("wrote {}/{}-* (Markdown, JSON where available, error-vs-time plot)", out.display(), s.id());
             }
@@ -123,8 +123,8 @@ pub fn bench(a: BenchArgs) -> Result<ExitCode> {
             };
             for s in p.stages() {
                 let measured = match focus {
-                    None => s.def().bench_gpu(s.id(), &ctx)?,
-                    Some(f) if s.def().bench_focus() == Some(f) => s.def().bench(s.id(), &ctx)?,
+                    None => s.def().stage().bench_gpu(s.id(), &ctx)?,
+                    Some(f) if s.def().stage().bench_focus() == Some(f) => s.def().stage().bench(s.id(), &ctx)?,
                     Some(_) => None,
                 };
                 if let Some((text, r)) = measured {

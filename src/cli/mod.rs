@@ -106,7 +106,7 @@ pub(super) fn compiled_for_stages(
     cache: &SceneCache,
 ) -> Result<Option<ValidatedPipeline>> {
     let p = load(pipeline)?;
-    let scenes: Vec<PathBuf> = p.stages().iter().flat_map(|s| s.def().scenes(&base_dir(&p))).collect();
+    let scenes: Vec<PathBuf> = p.stages().iter().flat_map(|s| s.def().stage().scenes(&base_dir(&p))).collect();
     if scenes.is_empty() {
         return Ok(None);
     }
@@ -121,7 +121,7 @@ pub(super) fn stage_device(
     p: &ValidatedPipeline,
     request: voltab::render::gpu::DeviceRequest,
 ) -> Result<voltab::render::gpu::Device> {
-    if p.stages().iter().any(|s| s.def().uses_device()) {
+    if p.stages().iter().any(|s| s.def().stage().uses_device()) {
         let (d, message) = voltab::render::gpu::select(request).map_err(|e| anyhow::anyhow!(e))?;
         eprintln!("{message}");
         Ok(d)
@@ -163,7 +163,7 @@ pub(super) fn planned(
     }
     let mut scenes = scenes.to_vec();
     for s in p.stages() {
-        for f in s.def().scenes(&base_dir(&p)) {
+        for f in s.def().stage().scenes(&base_dir(&p)) {
             // The built-in default pipeline outside a checkout names scenes that are not here.
             let embedded_elsewhere = !f.exists() && !p.path().exists();
             if !embedded_elsewhere && !scenes.iter().any(|g| same_file(g, &f)) {

@@ -212,7 +212,7 @@ pub fn merge_bake(
                     .collect::<Result<Vec<_>, ShardError>>()?;
                 b.run_with(s.id(), ctx, Some(&given)).map_err(stage_err)?
             }
-            def => def.run(s.id(), ctx).map_err(stage_err)?,
+            def => def.stage().run(s.id(), ctx).map_err(stage_err)?,
         };
         results.push((s.id().to_string(), outcome));
     }

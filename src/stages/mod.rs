@@ -110,6 +110,54 @@ pub struct StageOutcome {
     pub summary: String,
 }
 
+/// One stage kind's behaviour, implemented in the kind's own folder: its table references, range
+/// checks, scenes, run, report ladder and benchmarks. [`StageDef`] dispatches to it through
+/// [`StageDef::stage`] (one match), and so does the front end through [`StageKind`].
+pub trait Stage: Sync {
+    /// Kind name as written in RON.
+    fn kind(&self) -> &'static str;
+    /// (field, referenced table id, required table kind) for every table this stage reads.
+    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
+        Vec::new()
+    }
+    /// Range checks.
+    fn validate(&self) -> Vec<FieldIssue>;
+    /// Problems only the referenced tables' definitions reveal (see [`StageKind::check_tables`]).
+    fn check_tables(&self, _id: &str, _table: &dyn Fn(&str) -> Option<TableDef>) -> Vec<FieldIssue> {
+        Vec::new()
+    }
+    /// Scene files the stage reads, resolved against `base_dir` (the pipeline's folder).
+    fn scenes(&self, _base_dir: &Path) -> Vec<PathBuf> {
+        Vec::new()
+    }
+    /// Runs the stage on tables compiled into `ctx.out_dir`.
+    fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError>;
+    /// Error against run time for stages that have a reference (`voltab report --stages`): Markdown
+    /// text, or `None` for stages without one.
+    fn report(&self, _id: &str, _ctx: &StageContext, _report_dir: &Path) -> Result<Option<String>, StageError> {
+        Ok(None)
+    }
+    /// The `voltab bench` suite whose run includes this stage's [`Stage::bench`]; `None` for stages
+    /// without a benchmark.
+    fn bench_focus(&self) -> Option<BenchFocus> {
+        None
+    }
+    /// `voltab bench --suite bake | effects | translucent | pop`: the stage's own benchmark, its text
+    /// and rows; `None` for stages without one.
+    fn bench(&self, _id: &str, _ctx: &StageContext) -> Result<Option<(String, Vec<BenchRow>)>, StageError> {
+        Ok(None)
+    }
+    /// `voltab bench --suite gpu`: the effect's frame on the CPU and on `ctx.device` side by side, with
+    /// the GPU's per-pass times; `None` for stages without a GPU path.
+    fn bench_gpu(&self, _id: &str, _ctx: &StageContext) -> Result<Option<(String, Vec<BenchRow>)>, StageError> {
+        Ok(None)
+    }
+    /// True for the real-time effects, which run on [`StageContext::device`].
+    fn uses_device(&self) -> bool {
+        false
+    }
+}
+
 /// A stage failed.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -212,137 +260,32 @@ impl StageKinds for StageDecl {
     }
 }
 
-impl StageKind for StageDef {
-    fn kind(&self) -> &'static str {
+impl StageDef {
+    /// The stage behind the definition: every question about a stage goes through this one match.
+    pub fn stage(&self) -> &dyn Stage {
         match self {
-            StageDef::PlotPhase(_) => plot_phase::PlotPhaseRaw::KIND,
-            StageDef::BakeLightmaps(_) => bake::BakeLightmapsRaw::KIND,
-            StageDef::EpipolarShadows(_) => god_rays::EpipolarShadowsRaw::KIND,
-            StageDef::ImageFog(_) => image_fog::ImageFogRaw::KIND,
-            StageDef::TranslucentRender(_) => translucent::TranslucentRenderRaw::KIND,
-            StageDef::PopRender(_) => pop::PopRenderRaw::KIND,
-        }
-    }
-    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
-        match self {
-            StageDef::PlotPhase(p) => vec![("table", p.table.clone(), crate::tables::phase_hg::PhaseHgRaw::KIND)],
-            StageDef::BakeLightmaps(b) => b
-                .table_ref()
-                .map(|t| ("table", t.to_string(), crate::tables::zh_response::ZhResponseRaw::KIND))
-                .into_iter()
-                .collect(),
-            StageDef::TranslucentRender(t) => {
-                let kind = crate::tables::ms_lobes::MsLobesRaw::KIND;
-                let mut v = vec![("table", t.table.clone(), kind)];
-                v.extend(t.lobe_tables.iter().map(|l| ("lobe_tables", l.clone(), kind)));
-                v
-            }
-            StageDef::PopRender(p) => {
-                vec![("table", p.table.clone(), crate::tables::pop_preset::PopPresetRaw::KIND)]
-            }
-            StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) => Vec::new(),
-        }
-    }
-    fn validate(&self) -> Vec<FieldIssue> {
-        match self {
-            StageDef::PlotPhase(p) => p.validate(),
-            StageDef::BakeLightmaps(b) => b.validate(),
-            StageDef::EpipolarShadows(e) => e.validate(),
-            StageDef::ImageFog(f) => f.validate(),
-            StageDef::TranslucentRender(t) => t.validate(),
-            StageDef::PopRender(p) => p.validate(),
-        }
-    }
-    fn check_tables(&self, id: &str, table: &dyn Fn(&str) -> Option<TableDef>) -> Vec<FieldIssue> {
-        match self {
-            StageDef::PlotPhase(p) => table(&p.table).and_then(|t| p.check_table(id, &t)).into_iter().collect(),
-            _ => Vec::new(),
+            StageDef::PlotPhase(s) => s,
+            StageDef::BakeLightmaps(s) => s,
+            StageDef::EpipolarShadows(s) => s,
+            StageDef::ImageFog(s) => s,
+            StageDef::TranslucentRender(s) => s,
+            StageDef::PopRender(s) => s,
         }
     }
 }
 
-impl StageDef {
-    /// Scene files the stage reads, resolved against `base_dir` (the pipeline's folder).
-    pub fn scenes(&self, base_dir: &Path) -> Vec<PathBuf> {
-        match self {
-            StageDef::PlotPhase(_) => Vec::new(),
-            StageDef::BakeLightmaps(b) => vec![b.scene_path(base_dir)],
-            StageDef::EpipolarShadows(e) => vec![e.scene_path(base_dir)],
-            StageDef::ImageFog(f) => vec![f.scene_path(base_dir)],
-            StageDef::TranslucentRender(t) => vec![t.scene_path(base_dir)],
-            StageDef::PopRender(p) => vec![p.scene_path(base_dir)],
-        }
+impl StageKind for StageDef {
+    fn kind(&self) -> &'static str {
+        self.stage().kind()
     }
-    /// Error against run time for stages that have a reference (`voltab report --stages`): Markdown text,
-    /// or `None` for stages without one.
-    pub fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<Option<String>, StageError> {
-        match self {
-            StageDef::PlotPhase(_) => Ok(None),
-            StageDef::BakeLightmaps(b) => {
-                let r = b.report(id, ctx, report_dir, &bake::report::LadderOptions::default())?;
-                Ok(Some(bake::report::markdown(&r)))
-            }
-            StageDef::EpipolarShadows(e) => e.report(id, ctx, report_dir).map(Some),
-            StageDef::ImageFog(f) => f.report(id, ctx, report_dir).map(Some),
-            StageDef::TranslucentRender(t) => t.report(id, ctx, report_dir).map(Some),
-            StageDef::PopRender(p) => p.report(id, ctx, report_dir).map(Some),
-        }
+    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
+        self.stage().table_refs()
     }
-
-    /// The `voltab bench` focus whose run includes this stage's [`StageDef::bench`]; `None` for stages
-    /// without a benchmark.
-    pub fn bench_focus(&self) -> Option<BenchFocus> {
-        match self {
-            StageDef::PlotPhase(_) => None,
-            StageDef::BakeLightmaps(_) => Some(BenchFocus::Bake),
-            StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) => Some(BenchFocus::Effects),
-            StageDef::TranslucentRender(_) => Some(BenchFocus::Translucent),
-            StageDef::PopRender(_) => Some(BenchFocus::Pop),
-        }
+    fn validate(&self) -> Vec<FieldIssue> {
+        self.stage().validate()
     }
-
-    /// `voltab bench --suite bake | effects | translucent | pop`: the stage's own benchmark, its text
-    /// (empty for the bake, whose rows say it all) and rows; `None` for stages without one.
-    pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<BenchRow>)>, StageError> {
-        match self {
-            StageDef::PlotPhase(_) => Ok(None),
-            StageDef::BakeLightmaps(b) => b.bench(id, ctx).map(|rows| Some((String::new(), rows))),
-            StageDef::EpipolarShadows(e) => e.bench(id, ctx).map(Some),
-            StageDef::ImageFog(f) => f.bench(id, ctx).map(Some),
-            StageDef::TranslucentRender(t) => t.bench(id, ctx).map(Some),
-            StageDef::PopRender(p) => p.bench(id, ctx).map(Some),
-        }
-    }
-
-    /// `voltab bench --suite gpu`: the effect's frame on the CPU and on `ctx.device` side by side, with the
-    /// GPU's per-pass times; `None` for stages without a GPU path.
-    pub fn bench_gpu(
-        &self,
-        id: &str,
-        ctx: &StageContext,
-    ) -> Result<Option<(String, Vec<crate::stages::BenchRow>)>, StageError> {
-        match self {
-            StageDef::PopRender(p) => p.bench_gpu(id, ctx).map(Some),
-            StageDef::EpipolarShadows(e) => e.bench_gpu(id, ctx).map(Some),
-            _ => Ok(None),
-        }
-    }
-
-    /// True for the real-time effects, which run on [`StageContext::device`].
-    pub fn uses_device(&self) -> bool {
-        matches!(self, StageDef::EpipolarShadows(_) | StageDef::ImageFog(_) | StageDef::PopRender(_))
-    }
-
-    /// Runs the stage on tables compiled into `ctx.out_dir`.
-    pub fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
-        match self {
-            StageDef::PlotPhase(p) => p.run(id, ctx.out_dir),
-            StageDef::BakeLightmaps(b) => b.run(id, ctx),
-            StageDef::EpipolarShadows(e) => e.run(id, ctx),
-            StageDef::ImageFog(f) => f.run(id, ctx),
-            StageDef::TranslucentRender(t) => t.run(id, ctx),
-            StageDef::PopRender(p) => p.run(id, ctx),
-        }
+    fn check_tables(&self, id: &str, table: &dyn Fn(&str) -> Option<TableDef>) -> Vec<FieldIssue> {
+        self.stage().check_tables(id, table)
     }
 }
 

@@ -113,3 +113,21 @@ impl PlotPhase {
         })
     }
 }
+
+impl super::Stage for PlotPhase {
+    fn kind(&self) -> &'static str {
+        PlotPhaseRaw::KIND
+    }
+    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
+        vec![("table", self.table.clone(), crate::tables::phase_hg::PhaseHgRaw::KIND)]
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        PlotPhase::validate(self)
+    }
+    fn check_tables(&self, id: &str, table: &dyn Fn(&str) -> Option<TableDef>) -> Vec<FieldIssue> {
+        table(&self.table).and_then(|t| self.check_table(id, &t)).into_iter().collect()
+    }
+    fn run(&self, id: &str, ctx: &super::StageContext) -> Result<StageOutcome, StageError> {
+        PlotPhase::run(self, id, ctx.out_dir)
+    }
+}

@@ -22,6 +22,36 @@ pub mod lights;
 pub mod report;
 pub mod transport;
 
+impl super::Stage for BakeLightmaps {
+    fn kind(&self) -> &'static str {
+        BakeLightmapsRaw::KIND
+    }
+    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
+        let kind = crate::tables::zh_response::ZhResponseRaw::KIND;
+        self.table_ref().map(|t| ("table", t.to_string(), kind)).into_iter().collect()
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        BakeLightmaps::validate(self)
+    }
+    fn scenes(&self, base_dir: &Path) -> Vec<PathBuf> {
+        vec![self.scene_path(base_dir)]
+    }
+    fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        BakeLightmaps::run(self, id, ctx)
+    }
+    fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<Option<String>, StageError> {
+        let r = BakeLightmaps::report(self, id, ctx, report_dir, &report::LadderOptions::default())?;
+        Ok(Some(report::markdown(&r)))
+    }
+    fn bench_focus(&self) -> Option<super::BenchFocus> {
+        Some(super::BenchFocus::Bake)
+    }
+    /// The bake's rows say it all: its text is empty.
+    fn bench(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<super::BenchRow>)>, StageError> {
+        BakeLightmaps::bench(self, id, ctx).map(|rows| Some((String::new(), rows)))
+    }
+}
+
 #[cfg(test)]
 mod tests;
 

@@ -486,3 +486,33 @@ impl EpipolarShadows {
         Ok(md)
     }
 }
+
+impl crate::stages::Stage for EpipolarShadows {
+    fn kind(&self) -> &'static str {
+        EpipolarShadowsRaw::KIND
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        EpipolarShadows::validate(self)
+    }
+    fn scenes(&self, base_dir: &Path) -> Vec<std::path::PathBuf> {
+        vec![self.scene_path(base_dir)]
+    }
+    fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        EpipolarShadows::run(self, id, ctx)
+    }
+    fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<Option<String>, StageError> {
+        EpipolarShadows::report(self, id, ctx, report_dir).map(Some)
+    }
+    fn bench_focus(&self) -> Option<crate::stages::BenchFocus> {
+        Some(crate::stages::BenchFocus::Effects)
+    }
+    fn bench(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<BenchRow>)>, StageError> {
+        EpipolarShadows::bench(self, id, ctx).map(Some)
+    }
+    fn bench_gpu(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<BenchRow>)>, StageError> {
+        EpipolarShadows::bench_gpu(self, id, ctx).map(Some)
+    }
+    fn uses_device(&self) -> bool {
+        true
+    }
+}

@@ -545,3 +545,30 @@ fn stratified(w: usize, h: usize, n: usize) -> Vec<(usize, usize)> {
     let nx = (n / ny).clamp(1, w);
     image_fog::gather::grid_pixels(w, h, nx, ny)
 }
+
+impl crate::stages::Stage for ImageFogStage {
+    fn kind(&self) -> &'static str {
+        ImageFogRaw::KIND
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        ImageFogStage::validate(self)
+    }
+    fn scenes(&self, base_dir: &Path) -> Vec<std::path::PathBuf> {
+        vec![self.scene_path(base_dir)]
+    }
+    fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        ImageFogStage::run(self, id, ctx)
+    }
+    fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<Option<String>, StageError> {
+        ImageFogStage::report(self, id, ctx, report_dir).map(Some)
+    }
+    fn bench_focus(&self) -> Option<crate::stages::BenchFocus> {
+        Some(crate::stages::BenchFocus::Effects)
+    }
+    fn bench(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<BenchRow>)>, StageError> {
+        ImageFogStage::bench(self, id, ctx).map(Some)
+    }
+    fn uses_device(&self) -> bool {
+        true
+    }
+}

@@ -807,3 +807,33 @@ impl TranslucentRender {
         Ok((text, rows))
     }
 }
+
+impl crate::stages::Stage for TranslucentRender {
+    fn kind(&self) -> &'static str {
+        TranslucentRenderRaw::KIND
+    }
+    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
+        let kind = crate::tables::ms_lobes::MsLobesRaw::KIND;
+        let mut v = vec![("table", self.table.clone(), kind)];
+        v.extend(self.lobe_tables.iter().map(|l| ("lobe_tables", l.clone(), kind)));
+        v
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        TranslucentRender::validate(self)
+    }
+    fn scenes(&self, base_dir: &Path) -> Vec<PathBuf> {
+        vec![self.scene_path(base_dir)]
+    }
+    fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        TranslucentRender::run(self, id, ctx)
+    }
+    fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<Option<String>, StageError> {
+        TranslucentRender::report(self, id, ctx, report_dir).map(Some)
+    }
+    fn bench_focus(&self) -> Option<crate::stages::BenchFocus> {
+        Some(crate::stages::BenchFocus::Translucent)
+    }
+    fn bench(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<BenchRow>)>, StageError> {
+        TranslucentRender::bench(self, id, ctx).map(Some)
+    }
+}

@@ -882,3 +882,44 @@ impl PopRender {
         Ok(StageOutcome { outputs, summary: format!("{line} → {}", dir.display()) })
     }
 }
+
+impl crate::stages::Stage for PopRender {
+    fn kind(&self) -> &'static str {
+        PopRenderRaw::KIND
+    }
+    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
+        vec![("table", self.table.clone(), crate::tables::pop_preset::PopPresetRaw::KIND)]
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        PopRender::validate(self)
+    }
+    fn scenes(&self, base_dir: &Path) -> Vec<std::path::PathBuf> {
+        vec![self.scene_path(base_dir)]
+    }
+    fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        PopRender::run(self, id, ctx)
+    }
+    fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<Option<String>, StageError> {
+        PopRender::report(self, id, ctx, report_dir).map(Some)
+    }
+    fn bench_focus(&self) -> Option<crate::stages::BenchFocus> {
+        Some(crate::stages::BenchFocus::Pop)
+    }
+    fn bench(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+    ) -> Result<Option<(String, Vec<crate::stages::BenchRow>)>, StageError> {
+        PopRender::bench(self, id, ctx).map(Some)
+    }
+    fn bench_gpu(
+        &self,
+        id: &str,
+        ctx: &StageContext,
+    ) -> Result<Option<(String, Vec<crate::stages::BenchRow>)>, StageError> {
+        PopRender::bench_gpu(self, id, ctx).map(Some)
+    }
+    fn uses_device(&self) -> bool {
+        true
+    }
+}
