@@ -133,7 +133,8 @@ fn per_table_rows(p: &ValidatedPipeline, bench: &BenchOptions, rows: &mut Vec<Be
     let limits = Limits::from_machine();
     for table in p.tables().iter().filter(|t| bench.only.is_empty() || bench.only.iter().any(|o| o == t.id())) {
         let t_gen = Instant::now();
-        let generated = table.def().generate(table.key(), &|_| {}).map_err(|e| BenchError::Variant(e.to_string()))?;
+        let generated =
+            table.def().kind_impl().generate(table.key(), &|_| {}).map_err(|e| BenchError::Variant(e.to_string()))?;
         let generate_ms = ms(t_gen);
         let mut sizes = Vec::new();
         let mut times = Vec::new();

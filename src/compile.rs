@@ -150,8 +150,8 @@ pub fn encode_table(t: &ValidatedTable, g: &Generated) -> Result<container::Enco
     let def = t.def();
     let header = Header {
         kind: def.kind().to_owned(),
-        kind_schema_version: def.kind_schema_version(),
-        generator_version: def.generator_version().to_owned(),
+        kind_schema_version: def.kind_impl().kind_schema_version(),
+        generator_version: def.kind_impl().generator_version().to_owned(),
         definition_ron: def.canonical_ron(),
         content_key: *t.key(),
         arrays: g.arrays.clone(),
@@ -171,20 +171,24 @@ fn zstd_level(def: &TableDef) -> i32 {
 /// Generates and encodes one table, returning the bytes and its sidecar.
 pub fn build_table(t: &ValidatedTable, progress: &(dyn Fn(u64) + Sync)) -> Result<(Vec<u8>, Sidecar), CompileError> {
     let t0 = Instant::now();
-    let generated =
-        t.def().generate(t.key(), progress).map_err(|source| CompileError::Generate { id: t.id().into(), source })?;
+    let generated = t
+        .def()
+        .kind_impl()
+        .generate(t.key(), progress)
+        .map_err(|source| CompileError::Generate { id: t.id().into(), source })?;
     let generate_ms = t0.elapsed().as_secs_f64() * 1e3;
     let t_check = Instant::now();
     let mut generated = generated;
     generated.stats = t
         .def()
+        .kind_impl()
         .estimate_errors(&generated, t.key())
         .map_err(|e| CompileError::Generate { id: t.id().into(), source: GenerateError::Layout(e) })?;
     let check_ms = t_check.elapsed().as_secs_f64() * 1e3;
     // Progress: generation reports its own units; checking and encoding count as much again each.
-    progress(t.def().work_units());
+    progress(t.def().kind_impl().work_units());
     let (bytes, mut sidecar) = encode_with_sidecar(t, &generated)?;
-    progress(t.def().work_units());
+    progress(t.def().kind_impl().work_units());
     sidecar.generate_ms = generate_ms;
     sidecar.check_ms = check_ms;
     Ok((bytes, sidecar))
@@ -202,7 +206,7 @@ pub fn encode_with_sidecar(t: &ValidatedTable, generated: &Generated) -> Result<
         id: t.id().into(),
         kind: t.def().kind().into(),
         content_key: hex(t.key()),
-        generator_version: t.def().generator_version().into(),
+        generator_version: t.def().kind_impl().generator_version().into(),
         raw_bytes: s.raw_bytes,
         stored_bytes: s.stored_bytes,
         file_bytes: enc.bytes.len() as u64,
@@ -307,7 +311,7 @@ fn read_sidecar(path: &Path, t: &ValidatedTable) -> Result<Sidecar, CompileError
         id: t.id().into(),
         kind: t.def().kind().into(),
         content_key: hex(t.key()),
-        generator_version: t.def().generator_version().into(),
+        generator_version: t.def().kind_impl().generator_version().into(),
         raw_bytes: 0,
         stored_bytes: 0,
         file_bytes: 0,
@@ -342,13 +346,13 @@ impl TableLines {
     /// The line of table `t`: its generation reports `work_units` and its encoding and check one
     /// more share each ([`build_table`]), hence a length of three shares.
     fn start(&self, t: &ValidatedTable) -> ProgressBar {
-        let units = t.def().work_units();
+        let units = t.def().kind_impl().work_units();
         let bar = self.multi.add(ProgressBar::new(3 * units));
         if let Some(style) = &self.style {
             bar.set_style(style.clone());
         }
         bar.set_prefix(t.id().to_string());
-        bar.set_message(format!("{} ({} {})", t.def().kind(), units, t.def().work_unit_name()));
+        bar.set_message(format!("{} ({} {})", t.def().kind(), units, t.def().kind_impl().work_unit_name()));
         bar
     }
 

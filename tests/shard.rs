@@ -319,7 +319,7 @@ fn a_slice_split_into_photon_batches_is_the_slice_walked_whole() {
     let local = d.path().join("local");
     compile(&p, &CompileOptions { out_dir: local.clone(), ..Default::default() }).unwrap();
     let t = &p.tables()[0];
-    assert_eq!(t.def().units(), 3, "two photon batches and the check");
+    assert_eq!(t.def().kind_impl().units(), 3, "two photon batches and the check");
     let dirs = shards(&p, d.path(), 3);
     let units = voltab::shard::compile_units(&p);
     assert_eq!(voltab::shard::assign(&units, 3).iter().collect::<std::collections::BTreeSet<_>>().len(), 3);

@@ -32,8 +32,8 @@ pub fn content_key(def: &TableDef) -> [u8; 32] {
     h.update(b"voltab content key v1\0");
     h.update(def.kind().as_bytes());
     h.update(b"\0");
-    h.update(&def.kind_schema_version().to_le_bytes());
-    h.update(def.generator_version().as_bytes());
+    h.update(&def.kind_impl().kind_schema_version().to_le_bytes());
+    h.update(def.kind_impl().generator_version().as_bytes());
     h.update(b"\0");
     h.update(&FORMAT_MAJOR.to_le_bytes());
     h.update(def.canonical_ron().as_bytes());

@@ -130,11 +130,11 @@ impl<D: StageKind> ValidatedPipeline<D> {
 impl ValidatedTable {
     /// The same table with another definition of the same kind, revalidated (used by report ladders).
     pub fn with_def(&self, def: TableDef, limits: &Limits) -> Result<Self, String> {
-        if let Some(i) = def.validate().first() {
+        if let Some(i) = def.kind_impl().validate().first() {
             return Err(format!("{}: {}", i.message, i.help));
         }
-        if def.estimated_bytes() > limits.memory_bytes {
-            return Err(format!("needs {} bytes", def.estimated_bytes()));
+        if def.kind_impl().estimated_bytes() > limits.memory_bytes {
+            return Err(format!("needs {} bytes", def.kind_impl().estimated_bytes()));
         }
         let key = crate::cache::content_key(&def);
         Ok(Self { id: self.id.clone(), def, loc: self.loc.clone(), key })
@@ -334,7 +334,7 @@ pub fn validate<S: StageKinds>(
             continue;
         }
         let def = current.resolve();
-        let issues = def.validate();
+        let issues = def.kind_impl().validate();
         for i in &issues {
             diags.push(
                 Diagnostic::new(
@@ -348,7 +348,7 @@ pub fn validate<S: StageKinds>(
         if !issues.is_empty() {
             continue;
         }
-        let bytes = def.estimated_bytes();
+        let bytes = def.kind_impl().estimated_bytes();
         if bytes > limits.memory_bytes {
             diags.push(
                 Diagnostic::new(

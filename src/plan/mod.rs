@@ -297,7 +297,7 @@ fn skipped(t: &ValidatedTable, reason: String) -> TablePlan {
         decision: Decision::Skip,
         reason,
         items: Vec::new(),
-        full_work: t.def().work_units(),
+        full_work: t.def().kind_impl().work_units(),
         pruned_work: 0,
         def: None,
     }
@@ -310,8 +310,8 @@ fn compiled(t: &ValidatedTable, reason: String, items: Vec<Item>, def: TableDef)
         decision: Decision::Compile,
         reason,
         items,
-        full_work: t.def().work_units(),
-        pruned_work: def.work_units(),
+        full_work: t.def().kind_impl().work_units(),
+        pruned_work: def.kind_impl().work_units(),
         def: Some(def),
     }
 }

@@ -130,19 +130,19 @@ pub fn run(p: &ValidatedPipeline, out_dir: &Path, progress: bool) -> Result<Repo
     };
     std::fs::create_dir_all(out_dir).map_err(|e| out_err(out_dir, &e))?;
     let limits = Limits::from_machine();
-    let rungs: u64 = p.tables().iter().map(|t| t.def().report_ladder().len() as u64).sum();
+    let rungs: u64 = p.tables().iter().map(|t| t.def().kind_impl().report_ladder().len() as u64).sum();
     let bar = progress_bar(progress, rungs, "report: ladder rungs");
     let mut tables = Vec::new();
     for t in p.tables() {
         let mut rows = Vec::new();
-        for (budget, def) in t.def().report_ladder() {
+        for (budget, def) in t.def().kind_impl().report_ladder() {
             let rung_err = |message: String| ReportError::Rung { id: t.id().into(), budget: budget.clone(), message };
             let vt = t.with_def(def, &limits).map_err(rung_err)?;
-            let (generated, generate_ms) = best_time(|| vt.def().generate(vt.key(), &|_| {}));
+            let (generated, generate_ms) = best_time(|| vt.def().kind_impl().generate(vt.key(), &|_| {}));
             let generated: Generated = generated.map_err(|e| rung_err(e.to_string()))?;
             let (enc, encode_ms) = best_time(|| encode_table(&vt, &generated));
             let enc = enc.map_err(|e| rung_err(e.to_string()))?;
-            let errors = vt.def().report_measure(&generated).map_err(rung_err)?;
+            let errors = vt.def().kind_impl().report_measure(&generated).map_err(rung_err)?;
             let error_max = errors.iter().map(|e| e.1).fold(0.0, f64::max);
             rows.push(Row {
                 budget,
@@ -157,11 +157,12 @@ pub fn run(p: &ValidatedPipeline, out_dir: &Path, progress: bool) -> Result<Repo
             bar.inc(1);
         }
         let plot_path = out_dir.join(format!("{}-error-vs-time.png", t.id()));
-        write_plot(&plot_path, t.id(), t.def().report_error_name(), &rows).map_err(|e| out_err(&plot_path, &e))?;
+        write_plot(&plot_path, t.id(), t.def().kind_impl().report_error_name(), &rows)
+            .map_err(|e| out_err(&plot_path, &e))?;
         tables.push(TableReport {
             id: t.id().into(),
             kind: t.def().kind().into(),
-            error_name: t.def().report_error_name().into(),
+            error_name: t.def().kind_impl().report_error_name().into(),
             rows,
             plot: plot_path,
         });

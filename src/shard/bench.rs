@@ -110,7 +110,7 @@ pub fn run(p: &ValidatedPipeline, only: &[String], say: &dyn Fn(&str)) -> Result
                     Payload::Table { vtab, sidecar: serde_json::to_vec(&sc).unwrap_or_default() }
                 }
                 Some(k) => Payload::Unit {
-                    part: t.def().generate_unit(t.key(), k, &|_| {}).map_err(|e| e.to_string())?,
+                    part: t.def().kind_impl().generate_unit(t.key(), k, &|_| {}).map_err(|e| e.to_string())?,
                     ms: 0.0,
                 },
             };

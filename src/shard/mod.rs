@@ -148,8 +148,8 @@ pub struct Unit {
 pub fn compile_units(p: &ValidatedPipeline) -> Vec<Unit> {
     let mut units = Vec::new();
     for (ti, t) in p.tables().iter().enumerate() {
-        let n = t.def().units();
-        let work = t.def().work_units().max(1);
+        let n = t.def().kind_impl().units();
+        let work = t.def().kind_impl().work_units().max(1);
         if n <= 1 {
             units.push(Unit { name: t.id().to_string(), table: ti, part: None, cost: work });
         } else {
@@ -361,7 +361,7 @@ fn reusable(path: &Path, limit: u64) -> Option<Vec<u8>> {
 
 /// Upper bound of a part file's size for a table (its generator's peak memory, plus slack).
 fn part_limit(t: &ValidatedTable) -> u64 {
-    u64::try_from(t.def().estimated_bytes().saturating_mul(2)).unwrap_or(u64::MAX).saturating_add(64 << 20)
+    u64::try_from(t.def().kind_impl().estimated_bytes().saturating_mul(2)).unwrap_or(u64::MAX).saturating_add(64 << 20)
 }
 
 /// Computes shard `spec` of compiling `p` into the shard folder `dir`. Units finished by an earlier
@@ -406,6 +406,7 @@ pub fn compile_shard(
             Some(k) => {
                 let part = t
                     .def()
+                    .kind_impl()
                     .generate_unit(t.key(), k, &|_| {})
                     .map_err(|source| CompileError::Generate { id: t.id().into(), source })?;
                 Payload::Unit { part, ms: t1.elapsed().as_secs_f64() * 1e3 }
@@ -729,7 +730,7 @@ fn assemble_table(
     check_ms: f64,
 ) -> Result<(Vec<u8>, Vec<u8>), ShardError> {
     let fail = |source: GenerateError| CompileError::Generate { id: t.id().into(), source };
-    let a = t.def().assemble(t.key(), parts).map_err(fail)?;
+    let a = t.def().kind_impl().assemble(t.key(), parts).map_err(fail)?;
     let (bytes, mut sidecar) = crate::compile::encode_with_sidecar(t, &a.generated)?;
     sidecar.generate_ms = generate_ms;
     sidecar.check_ms = check_ms + a.check_ms;

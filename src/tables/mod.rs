@@ -9,11 +9,13 @@
 //! Adding a kind: a module here with a `declare_params!` block, a variant in [`TableDecl`] and
 //! [`TableDef`], and the match arms below.
 
+pub mod kind;
 pub mod ms_lobes;
 pub mod phase_hg;
 pub mod pop_preset;
 pub mod zh_response;
 
+pub use kind::TableKind;
 use serde::{Deserialize, Serialize};
 
 use crate::container::{ArrayDesc, ArrayValues};
@@ -206,74 +208,19 @@ impl TableDecl {
 }
 
 impl TableDef {
+    /// The kind behind the definition: every question about a table goes through this one match.
+    pub fn kind_impl(&self) -> &dyn TableKind {
+        match self {
+            TableDef::PhaseHg(p) => p,
+            TableDef::ZhResponse(p) => p,
+            TableDef::MsLobes(p) => p,
+            TableDef::PopPreset(p) => p,
+        }
+    }
+
     /// Kind name.
     pub fn kind(&self) -> &'static str {
-        match self {
-            TableDef::PhaseHg(_) => phase_hg::PhaseHgRaw::KIND,
-            TableDef::ZhResponse(_) => zh_response::ZhResponseRaw::KIND,
-            TableDef::MsLobes(_) => ms_lobes::MsLobesRaw::KIND,
-            TableDef::PopPreset(_) => pop_preset::PopPresetRaw::KIND,
-        }
-    }
-
-    /// Version of this kind's array layout; a reader of the kind checks it.
-    pub fn kind_schema_version(&self) -> u32 {
-        match self {
-            TableDef::PhaseHg(_) => phase_hg::KIND_SCHEMA_VERSION,
-            TableDef::ZhResponse(_) => zh_response::KIND_SCHEMA_VERSION,
-            TableDef::MsLobes(_) => ms_lobes::KIND_SCHEMA_VERSION,
-            TableDef::PopPreset(_) => pop_preset::KIND_SCHEMA_VERSION,
-        }
-    }
-
-    /// Version of the generator's numerics; bumping it invalidates cached tables of this kind.
-    pub fn generator_version(&self) -> &'static str {
-        match self {
-            TableDef::PhaseHg(_) => phase_hg::GENERATOR_VERSION,
-            TableDef::ZhResponse(_) => zh_response::GENERATOR_VERSION,
-            TableDef::MsLobes(_) => ms_lobes::GENERATOR_VERSION,
-            TableDef::PopPreset(_) => pop_preset::GENERATOR_VERSION,
-        }
-    }
-
-    /// Range checks of every field.
-    pub fn validate(&self) -> Vec<FieldIssue> {
-        match self {
-            TableDef::PhaseHg(p) => p.validate(),
-            TableDef::ZhResponse(p) => p.validate(),
-            TableDef::MsLobes(p) => p.validate(),
-            TableDef::PopPreset(p) => p.validate(),
-        }
-    }
-
-    /// Bytes the generator will hold in memory at its peak (checked before allocating).
-    pub fn estimated_bytes(&self) -> u128 {
-        match self {
-            TableDef::PhaseHg(p) => p.estimated_bytes(),
-            TableDef::ZhResponse(p) => p.estimated_bytes(),
-            TableDef::MsLobes(p) => p.estimated_bytes(),
-            TableDef::PopPreset(p) => p.estimated_bytes(),
-        }
-    }
-
-    /// Work units reported through the progress callback.
-    pub fn work_units(&self) -> u64 {
-        match self {
-            TableDef::PhaseHg(p) => p.work_units(),
-            TableDef::ZhResponse(p) => p.work_units(),
-            TableDef::MsLobes(p) => p.work_units(),
-            TableDef::PopPreset(p) => p.work_units(),
-        }
-    }
-
-    /// What one of [`TableDef::work_units`] is, for progress lines.
-    pub fn work_unit_name(&self) -> &'static str {
-        match self {
-            TableDef::PhaseHg(_) => "g slices",
-            TableDef::ZhResponse(_) => "bounce responses",
-            TableDef::MsLobes(_) => "photons",
-            TableDef::PopPreset(_) => "quadrature chunks",
-        }
+        self.kind_impl().kind()
     }
 
     /// Canonical RON text of the definition: part of the content key and stored in the header.
@@ -281,16 +228,6 @@ impl TableDef {
         // Serialising a plain struct of numbers, strings and enums cannot fail; fall back to Debug
         // (still deterministic) rather than panic if it ever did.
         ron::to_string(self).unwrap_or_else(|_| format!("{self:?}"))
-    }
-
-    /// Runs the generator. `key` is the content key (seeds random streams).
-    pub fn generate(&self, key: &[u8; 32], progress: Progress<'_>) -> Result<Generated, GenerateError> {
-        match self {
-            TableDef::PhaseHg(p) => p.generate(key, progress),
-            TableDef::ZhResponse(p) => p.generate(key, progress),
-            TableDef::MsLobes(p) => p.generate(key, progress),
-            TableDef::PopPreset(p) => p.generate(key, progress),
-        }
     }
 }
 
@@ -339,132 +276,6 @@ pub struct Assembled {
     pub generated: Generated,
     /// Wall time of [`TableDef::estimate_errors`] on it \[ms\] (its references came from a unit).
     pub check_ms: f64,
-}
-
-impl TableDef {
-    /// How many independent work units the generator splits into, for a sharded compile
-    /// (`crate::shard`): for an `MsLobes` table its g slices (each its own random stream) and the
-    /// references of its check; 1 for the other kinds (the whole table is one unit: they take seconds,
-    /// not hours).
-    pub fn units(&self) -> usize {
-        match self {
-            TableDef::MsLobes(p) => p.g_values().len() * p.photon_units() + 1,
-            TableDef::ZhResponse(p) => p.unit_count() + 1,
-            _ => 1,
-        }
-    }
-
-    /// Computes work unit `unit` of a table with more than one ([`TableDef::units`]).
-    pub fn generate_unit(
-        &self,
-        key: &[u8; 32],
-        unit: usize,
-        progress: Progress<'_>,
-    ) -> Result<UnitPart, GenerateError> {
-        match self {
-            TableDef::MsLobes(p) if unit == p.g_values().len() * p.photon_units() => {
-                p.check_references(key).map(UnitPart::MsLobesCheck).map_err(GenerateError::Layout)
-            }
-            TableDef::MsLobes(p) => {
-                let (slice, batch) = (unit / p.photon_units(), unit % p.photon_units());
-                p.generate_batch(slice, batch, key, progress).map(|tally| UnitPart::MsLobesPhotons { slice, tally })
-            }
-            TableDef::ZhResponse(p) => p.shard_unit(unit, key, progress).map(UnitPart::Zh),
-            _ => Err(GenerateError::Layout(format!("a {} table is one work unit: generate it whole", self.kind()))),
-        }
-    }
-
-    /// The table and its error estimates from all its work units, in unit order: the same bits as
-    /// [`TableDef::generate`] followed by [`TableDef::estimate_errors`].
-    pub fn assemble(&self, key: &[u8; 32], parts: Vec<UnitPart>) -> Result<Assembled, GenerateError> {
-        match self {
-            TableDef::MsLobes(p) => {
-                let n = p.g_values().len();
-                let (mut tallies, mut refs) = (vec![Vec::new(); n], Vec::new());
-                for part in parts {
-                    match part {
-                        UnitPart::MsLobesPhotons { slice, tally } if slice < n => tallies[slice].push(tally),
-                        UnitPart::MsLobesCheck(r) => refs.extend(r),
-                        _ => return Err(GenerateError::Layout("a unit of another table given to a lobe table".into())),
-                    }
-                }
-                let slices = tallies
-                    .iter()
-                    .enumerate()
-                    .map(|(gi, t)| p.slice_from_tallies(gi, key, t))
-                    .collect::<Result<Vec<_>, _>>()?;
-                let mut generated = p.assemble(slices)?;
-                let t0 = std::time::Instant::now();
-                generated.stats = p.estimate_errors_with(&generated, key, &refs).map_err(GenerateError::Layout)?;
-                Ok(Assembled { generated, check_ms: t0.elapsed().as_secs_f64() * 1e3 })
-            }
-            TableDef::ZhResponse(p) => {
-                let (mut zh, mut refs) = (Vec::new(), Vec::new());
-                for part in parts {
-                    match part {
-                        UnitPart::Zh(zh_response::ZhPart::Check(r)) => refs.extend(r),
-                        UnitPart::Zh(z) => zh.push(z),
-                        _ => return Err(GenerateError::Layout("a lobe unit given to a ZH table".into())),
-                    }
-                }
-                let mut generated = p.assemble(zh)?;
-                let t0 = std::time::Instant::now();
-                generated.stats = p.estimate_errors_with(&generated, key, &refs).map_err(GenerateError::Layout)?;
-                Ok(Assembled { generated, check_ms: t0.elapsed().as_secs_f64() * 1e3 })
-            }
-            _ => Err(GenerateError::Layout(format!("a {} table is one work unit: generate it whole", self.kind()))),
-        }
-    }
-}
-
-impl TableDef {
-    /// Measures a generated table against the kind's independent reference.
-    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
-        match self {
-            TableDef::PhaseHg(p) => p.estimate_errors(generated, key),
-            TableDef::ZhResponse(p) => p.estimate_errors(generated, key),
-            TableDef::MsLobes(p) => p.estimate_errors(generated, key),
-            TableDef::PopPreset(p) => p.estimate_errors(generated, key),
-        }
-    }
-
-    /// Quality budgets for `voltab report`, cheapest first: (label, definition).
-    pub fn report_ladder(&self) -> Vec<(String, TableDef)> {
-        match self {
-            TableDef::PhaseHg(p) => p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::PhaseHg(d))).collect(),
-            TableDef::ZhResponse(p) => {
-                p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::ZhResponse(d))).collect()
-            }
-            TableDef::MsLobes(p) => p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::MsLobes(d))).collect(),
-            TableDef::PopPreset(p) => p.report_ladder().into_iter().map(|(l, d)| (l, TableDef::PopPreset(d))).collect(),
-        }
-    }
-
-    /// What the report's error axis means for this kind.
-    pub fn report_error_name(&self) -> &'static str {
-        match self {
-            TableDef::PhaseHg(_) => "max relative error of interpolated phase lookups vs double-double reference",
-            TableDef::ZhResponse(_) => {
-                "max relative error of the irradiance on a receiver facing the light vs the random-walk reference"
-            }
-            TableDef::MsLobes(_) => {
-                "max relative error of the lobes vs the beam quadrature (E_2) and the backward-walk reference (total)"
-            }
-            TableDef::PopPreset(_) => {
-                "max absolute error of the interpolated flow fractions [front, side, back] vs the double-double HG cumulative"
-            }
-        }
-    }
-
-    /// Error per curve (e.g. per g) of a generated table, for the report.
-    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, String> {
-        match self {
-            TableDef::PhaseHg(p) => p.report_measure(generated),
-            TableDef::ZhResponse(p) => p.report_measure(generated),
-            TableDef::MsLobes(p) => p.report_measure(generated),
-            TableDef::PopPreset(p) => p.report_measure(generated),
-        }
-    }
 }
 
 /// Failure to load a table for a consumer (every kind's reader).
@@ -528,14 +339,14 @@ pub fn stored_definition(h: &crate::container::Header, kind: &str) -> Result<Tab
     if def.kind() != kind {
         return Err(format!("its stored definition is a {} definition, not {kind}", def.kind()));
     }
-    if let Some(i) = def.validate().first() {
+    if let Some(i) = def.kind_impl().validate().first() {
         return Err(format!("its stored definition is invalid: {} (field `{}`; {})", i.message, i.field, i.help));
     }
     let limit = crate::pipeline::Limits::from_machine().memory_bytes;
-    if def.estimated_bytes() > limit {
+    if def.kind_impl().estimated_bytes() > limit {
         return Err(format!(
             "its stored definition would need {} bytes of memory, above this machine's limit of {limit}",
-            def.estimated_bytes()
+            def.kind_impl().estimated_bytes()
         ));
     }
     Ok(def)

@@ -642,3 +642,84 @@ pub struct CheckReference {
     /// (mean, standard error).
     pub value: (f64, f64),
 }
+
+impl super::TableKind for MsLobes {
+    fn kind(&self) -> &'static str {
+        MsLobesRaw::KIND
+    }
+    fn kind_schema_version(&self) -> u32 {
+        KIND_SCHEMA_VERSION
+    }
+    fn generator_version(&self) -> &'static str {
+        GENERATOR_VERSION
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        MsLobes::validate(self)
+    }
+    fn estimated_bytes(&self) -> u128 {
+        MsLobes::estimated_bytes(self)
+    }
+    fn work_units(&self) -> u64 {
+        MsLobes::work_units(self)
+    }
+    fn work_unit_name(&self) -> &'static str {
+        "photons"
+    }
+    fn generate(
+        &self,
+        key: &[u8; 32],
+        progress: super::Progress<'_>,
+    ) -> Result<super::Generated, super::GenerateError> {
+        MsLobes::generate(self, key, progress)
+    }
+    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, String> {
+        MsLobes::estimate_errors(self, generated, key)
+    }
+    fn report_ladder(&self) -> Vec<(String, super::TableDef)> {
+        MsLobes::report_ladder(self).into_iter().map(|(l, d)| (l, super::TableDef::MsLobes(d))).collect()
+    }
+    fn report_error_name(&self) -> &'static str {
+        "max relative error of the lobes vs the beam quadrature (E_2) and the backward-walk reference (total)"
+    }
+    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, String> {
+        MsLobes::report_measure(self, generated)
+    }
+
+    /// Its g slices' photon batches (each its own random stream) and one unit for the references of
+    /// its check.
+    fn units(&self) -> usize {
+        self.g_values().len() * self.photon_units() + 1
+    }
+    fn generate_unit(
+        &self,
+        key: &[u8; 32],
+        unit: usize,
+        progress: super::Progress<'_>,
+    ) -> Result<super::UnitPart, super::GenerateError> {
+        if unit == self.g_values().len() * self.photon_units() {
+            return self.check_references(key).map(super::UnitPart::MsLobesCheck).map_err(super::GenerateError::Layout);
+        }
+        let (slice, batch) = (unit / self.photon_units(), unit % self.photon_units());
+        self.generate_batch(slice, batch, key, progress).map(|tally| super::UnitPart::MsLobesPhotons { slice, tally })
+    }
+    fn assemble(&self, key: &[u8; 32], parts: Vec<super::UnitPart>) -> Result<super::Assembled, super::GenerateError> {
+        let n = self.g_values().len();
+        let (mut tallies, mut refs) = (vec![Vec::new(); n], Vec::new());
+        for part in parts {
+            match part {
+                super::UnitPart::MsLobesPhotons { slice, tally } if slice < n => tallies[slice].push(tally),
+                super::UnitPart::MsLobesCheck(r) => refs.extend(r),
+                _ => return Err(super::GenerateError::Layout("a unit of another table given to a lobe table".into())),
+            }
+        }
+        let slices = tallies
+            .iter()
+            .enumerate()
+            .map(|(gi, t)| self.slice_from_tallies(gi, key, t))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut generated = MsLobes::assemble(self, slices)?;
+        let t0 = std::time::Instant::now();
+        generated.stats = self.estimate_errors_with(&generated, key, &refs).map_err(super::GenerateError::Layout)?;
+        Ok(super::Assembled { generated, check_ms: t0.elapsed().as_secs_f64() * 1e3 })
+    }
+}

@@ -428,3 +428,46 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
     }
     v
 }
+
+impl super::TableKind for PhaseHg {
+    fn kind(&self) -> &'static str {
+        PhaseHgRaw::KIND
+    }
+    fn kind_schema_version(&self) -> u32 {
+        KIND_SCHEMA_VERSION
+    }
+    fn generator_version(&self) -> &'static str {
+        GENERATOR_VERSION
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        PhaseHg::validate(self)
+    }
+    fn estimated_bytes(&self) -> u128 {
+        PhaseHg::estimated_bytes(self)
+    }
+    fn work_units(&self) -> u64 {
+        PhaseHg::work_units(self)
+    }
+    fn work_unit_name(&self) -> &'static str {
+        "g slices"
+    }
+    fn generate(
+        &self,
+        key: &[u8; 32],
+        progress: super::Progress<'_>,
+    ) -> Result<super::Generated, super::GenerateError> {
+        PhaseHg::generate(self, key, progress)
+    }
+    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, String> {
+        PhaseHg::estimate_errors(self, generated, key)
+    }
+    fn report_ladder(&self) -> Vec<(String, super::TableDef)> {
+        PhaseHg::report_ladder(self).into_iter().map(|(l, d)| (l, super::TableDef::PhaseHg(d))).collect()
+    }
+    fn report_error_name(&self) -> &'static str {
+        "max relative error of interpolated phase lookups vs double-double reference"
+    }
+    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, String> {
+        PhaseHg::report_measure(self, generated)
+    }
+}

@@ -353,3 +353,46 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
     }
     v
 }
+
+impl super::TableKind for PopPreset {
+    fn kind(&self) -> &'static str {
+        PopPresetRaw::KIND
+    }
+    fn kind_schema_version(&self) -> u32 {
+        KIND_SCHEMA_VERSION
+    }
+    fn generator_version(&self) -> &'static str {
+        GENERATOR_VERSION
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        PopPreset::validate(self)
+    }
+    fn estimated_bytes(&self) -> u128 {
+        PopPreset::estimated_bytes(self)
+    }
+    fn work_units(&self) -> u64 {
+        PopPreset::work_units(self)
+    }
+    fn work_unit_name(&self) -> &'static str {
+        "quadrature chunks"
+    }
+    fn generate(
+        &self,
+        key: &[u8; 32],
+        progress: super::Progress<'_>,
+    ) -> Result<super::Generated, super::GenerateError> {
+        PopPreset::generate(self, key, progress)
+    }
+    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, String> {
+        PopPreset::estimate_errors(self, generated, key)
+    }
+    fn report_ladder(&self) -> Vec<(String, super::TableDef)> {
+        PopPreset::report_ladder(self).into_iter().map(|(l, d)| (l, super::TableDef::PopPreset(d))).collect()
+    }
+    fn report_error_name(&self) -> &'static str {
+        "max absolute error of the interpolated flow fractions [front, side, back] vs the double-double HG cumulative"
+    }
+    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, String> {
+        PopPreset::report_measure(self, generated)
+    }
+}

@@ -177,8 +177,8 @@ fn a_file_round_trip_gives_identical_arrays_and_generation_is_deterministic() {
     let td = TableDef::PopPreset(def.clone());
     let header = Header {
         kind: td.kind().to_owned(),
-        kind_schema_version: td.kind_schema_version(),
-        generator_version: td.generator_version().to_owned(),
+        kind_schema_version: td.kind_impl().kind_schema_version(),
+        generator_version: td.kind_impl().generator_version().to_owned(),
         definition_ron: td.canonical_ron(),
         content_key: [7; 32],
         arrays: g1.arrays.clone(),

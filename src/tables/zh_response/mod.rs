@@ -929,3 +929,73 @@ pub struct WalkReference {
     /// What [`walk_reference`] returned.
     pub value: (f64, Vec<f64>, Vec<f64>),
 }
+
+impl super::TableKind for ZhResponse {
+    fn kind(&self) -> &'static str {
+        ZhResponseRaw::KIND
+    }
+    fn kind_schema_version(&self) -> u32 {
+        KIND_SCHEMA_VERSION
+    }
+    fn generator_version(&self) -> &'static str {
+        GENERATOR_VERSION
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        ZhResponse::validate(self)
+    }
+    fn estimated_bytes(&self) -> u128 {
+        ZhResponse::estimated_bytes(self)
+    }
+    fn work_units(&self) -> u64 {
+        ZhResponse::work_units(self)
+    }
+    fn work_unit_name(&self) -> &'static str {
+        "bounce responses"
+    }
+    fn generate(
+        &self,
+        key: &[u8; 32],
+        progress: super::Progress<'_>,
+    ) -> Result<super::Generated, super::GenerateError> {
+        ZhResponse::generate(self, key, progress)
+    }
+    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, String> {
+        ZhResponse::estimate_errors(self, generated, key)
+    }
+    fn report_ladder(&self) -> Vec<(String, super::TableDef)> {
+        ZhResponse::report_ladder(self).into_iter().map(|(l, d)| (l, super::TableDef::ZhResponse(d))).collect()
+    }
+    fn report_error_name(&self) -> &'static str {
+        "max relative error of the irradiance on a receiver facing the light vs the random-walk reference"
+    }
+    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, String> {
+        ZhResponse::report_measure(self, generated)
+    }
+
+    /// One unit per (emitter, g slice) and one for the references of the sidecar check.
+    fn units(&self) -> usize {
+        self.unit_count() + 1
+    }
+    fn generate_unit(
+        &self,
+        key: &[u8; 32],
+        unit: usize,
+        progress: super::Progress<'_>,
+    ) -> Result<super::UnitPart, super::GenerateError> {
+        self.shard_unit(unit, key, progress).map(super::UnitPart::Zh)
+    }
+    fn assemble(&self, key: &[u8; 32], parts: Vec<super::UnitPart>) -> Result<super::Assembled, super::GenerateError> {
+        let (mut zh, mut refs) = (Vec::new(), Vec::new());
+        for part in parts {
+            match part {
+                super::UnitPart::Zh(ZhPart::Check(r)) => refs.extend(r),
+                super::UnitPart::Zh(z) => zh.push(z),
+                _ => return Err(super::GenerateError::Layout("a lobe unit given to a ZH table".into())),
+            }
+        }
+        let mut generated = ZhResponse::assemble(self, zh)?;
+        let t0 = std::time::Instant::now();
+        generated.stats = self.estimate_errors_with(&generated, key, &refs).map_err(super::GenerateError::Layout)?;
+        Ok(super::Assembled { generated, check_ms: t0.elapsed().as_secs_f64() * 1e3 })
+    }
+}
