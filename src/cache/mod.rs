@@ -18,27 +18,12 @@ use std::fs::{self, File};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::container::{FORMAT_MAJOR, VtabReader};
-use crate::tables::TableDef;
+use crate::container::VtabReader;
 
 /// Prefix of temporary files (removed on the next run if a run was killed).
 const TMP_PREFIX: &str = ".tmp-voltab-";
 /// Cache sub-folder.
 pub const CACHE_DIR: &str = ".voltab-cache";
-
-/// Content key of a table definition.
-pub fn content_key(def: &TableDef) -> [u8; 32] {
-    let mut h = blake3::Hasher::new();
-    h.update(b"voltab content key v1\0");
-    h.update(def.kind().as_bytes());
-    h.update(b"\0");
-    h.update(&def.kind_impl().kind_schema_version().to_le_bytes());
-    h.update(def.kind_impl().generator_version().as_bytes());
-    h.update(b"\0");
-    h.update(&FORMAT_MAJOR.to_le_bytes());
-    h.update(def.canonical_ron().as_bytes());
-    *h.finalize().as_bytes()
-}
 
 /// Lower-case hex of a key.
 pub fn hex(key: &[u8; 32]) -> String {

@@ -136,7 +136,7 @@ impl ValidatedTable {
         if def.kind_impl().estimated_bytes() > limits.memory_bytes {
             return Err(format!("needs {} bytes", def.kind_impl().estimated_bytes()));
         }
-        let key = crate::cache::content_key(&def);
+        let key = def.content_key();
         Ok(Self { id: self.id.clone(), def, loc: self.loc.clone(), key })
     }
 }
@@ -364,7 +364,7 @@ pub fn validate<S: StageKinds>(
             );
             continue;
         }
-        let key = crate::cache::content_key(&def);
+        let key = def.content_key();
         out.push(ValidatedTable { id: id.clone(), def, loc: entry_loc(*file, id), key });
     }
 

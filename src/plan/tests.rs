@@ -200,7 +200,7 @@ fn small_pipeline(dir: &Path) -> ValidatedPipeline {
 }
 
 fn generate(def: &TableDef) -> crate::tables::Generated {
-    def.kind_impl().generate(&crate::cache::content_key(def), &|_| {}).unwrap()
+    def.kind_impl().generate(&def.content_key(), &|_| {}).unwrap()
 }
 
 /// The acceptance test: what a consumer computes from the pruned tables equals what it computes

@@ -223,6 +223,22 @@ impl TableDef {
         self.kind_impl().kind()
     }
 
+    /// Content key: hash of (kind, kind schema version, generator version, container major, canonical
+    /// definition). The cache files tables under it; random streams are keyed by it.
+    pub fn content_key(&self) -> [u8; 32] {
+        let k = self.kind_impl();
+        let mut h = blake3::Hasher::new();
+        h.update(b"voltab content key v1\0");
+        h.update(k.kind().as_bytes());
+        h.update(b"\0");
+        h.update(&k.kind_schema_version().to_le_bytes());
+        h.update(k.generator_version().as_bytes());
+        h.update(b"\0");
+        h.update(&crate::container::FORMAT_MAJOR.to_le_bytes());
+        h.update(self.canonical_ron().as_bytes());
+        *h.finalize().as_bytes()
+    }
+
     /// Canonical RON text of the definition: part of the content key and stored in the header.
     pub fn canonical_ron(&self) -> String {
         // Serialising a plain struct of numbers, strings and enums cannot fail; fall back to Debug

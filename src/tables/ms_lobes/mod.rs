@@ -302,7 +302,7 @@ impl MsLobes {
             zstd_level: 1,
             ..self.clone()
         };
-        StreamKey::from_content_key(&crate::cache::content_key(&super::TableDef::MsLobes(one)), 0)
+        StreamKey::from_content_key(&super::TableDef::MsLobes(one).content_key(), 0)
     }
 
     /// The generator configuration of g slice `gi`.
