@@ -16,9 +16,12 @@
 //! ```
 //!
 //! Module map:
-//! - [`pipeline`]: RON language, diagnostics, includes/presets/overrides, validation, schema.
+//! - [`pipeline`]: RON language, diagnostics, includes/presets/overrides, validation, schema; generic
+//!   over the stage kinds ([`pipeline::StageKinds`]), so it imports no stage.
+//! - [`registry`]: the front end bound to the stage kinds ([`registry::ValidatedPipeline`],
+//!   [`registry::load_and_validate`], the schema pages) and every kind's stability rows.
 //! - [`tables`]: one module per table kind (`phase_hg`, `zh_response`, `ms_lobes`, `pop_preset`), each
-//!   with its error estimates.
+//!   implementing [`tables::TableKind`] with its error estimates.
 //! - [`container`]: the `.vtab` format: header, chunks, transforms, zstd, checksums, reader, diff.
 //! - [`cache`]: content keys, atomic writes, the locked output folder.
 //! - [`compile`]: parallel, incremental compilation with progress and sidecars.
@@ -26,7 +29,8 @@
 //! - [`shard`]: scale-out: a compile split into work units and a lightmap bake into texel tiles over
 //!   N shards (Slurm job arrays), and the merges that write the bytes one machine writes.
 //! - [`stages`]: consumers of tables, one folder per technique (`bake`, `god_rays`, `image_fog`,
-//!   `pop`, `translucent`, plus `plot_phase`): the stage, its algorithm, its GPU twin and shaders.
+//!   `pop`, `translucent`, plus `plot_phase`): the stage ([`stages::Stage`]), its algorithm, its GPU
+//!   twin and shaders.
 //! - [`render`]: the floor under the techniques: images, camera, G-buffer, luminance, optics, GPU context.
 //! - [`scene`]: glTF/USD import into one scene model, checks, BVH ray queries.
 //! - [`image_io`]: EXR and PNG output.

@@ -8,11 +8,11 @@
 //! output folder, published through [`crate::cache::OutputDir`] exactly as `voltab compile` publishes them.
 //!
 //! Work units follow the axes the generators key their random streams on
-//! ([`TableDef::units`](crate::tables::TableDef::units)): an `MsLobes` table splits into photon
+//! ([`TableKind::units`](crate::tables::TableKind::units)): an `MsLobes` table splits into photon
 //! batches (`MsLobes::unit_photons`, 2^18 or more on fine grids) per g slice (integer tallies, summed in the merge) plus one unit per
 //! check reference, a `ZhResponse` table into its (emitter, g) responses plus its walk references,
 //! and every other table is one unit. A unit computes the same bits wherever it runs, and
-//! [`TableDef::assemble`](crate::tables::TableDef::assemble) is the code `voltab compile` itself runs
+//! [`TableKind::assemble`](crate::tables::TableKind::assemble) is the code `voltab compile` itself runs
 //! after computing every unit in one process, so a merged table is byte-identical to a local one
 //! (tested in `tests/shard.rs`).
 //! Units are spread by longest-processing-time-first over the shards from their declared work

@@ -247,7 +247,7 @@ impl TableDef {
     }
 }
 
-/// A work unit's result before assembly (see [`TableDef::units`]): what a shard of a sharded compile
+/// A work unit's result before assembly (see [`TableKind::units`]): what a shard of a sharded compile
 /// hands to the merge.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum UnitPart {
@@ -288,9 +288,9 @@ impl UnitPart {
 /// What the merge of a split table's units gives: the table and its error estimates.
 #[derive(Debug, Clone)]
 pub struct Assembled {
-    /// The table, as [`TableDef::generate`] makes it.
+    /// The table, as [`TableKind::generate`] makes it.
     pub generated: Generated,
-    /// Wall time of [`TableDef::estimate_errors`] on it \[ms\] (its references came from a unit).
+    /// Wall time of [`TableKind::estimate_errors`] on it \[ms\] (its references came from a unit).
     pub check_ms: f64,
 }
 
@@ -346,7 +346,7 @@ pub fn check_kind<E>(
 }
 
 /// Parses a table header's stored definition and validates it exactly as a pipeline's table is
-/// validated (same [`TableDef::validate`], same memory estimate): a file whose definition was
+/// validated (same [`TableKind::validate`], same memory estimate): a file whose definition was
 /// edited (`z_min > z_max`, `g: [NaN]`, `rho_max: 0`, …) is refused with the first broken rule
 /// instead of reaching a reader that trusts it (issue 37).
 pub fn stored_definition(h: &crate::container::Header, kind: &str) -> Result<TableDef, String> {
