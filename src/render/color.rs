@@ -4,6 +4,9 @@
 //! **Input → output.** A linear RGB triple → its relative luminance `Y = 0.2126 R + 0.7152 G + 0.0722 B`
 //! (ITU-R BT.709-6 Item 3.3), summed left to right.
 
+/// Per-channel values (linear RGB, or a per-channel coefficient).
+pub type Rgb = [f64; 3];
+
 /// Rec. 709 / sRGB luminance weights (ITU-R BT.709-6 Item 3.3).
 pub const REC709_LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
 

@@ -1,12 +1,14 @@
 //! The render floor: what every technique's stage stands on — image and camera types, the G-buffer,
-//! colour, optics and the GPU context.
+//! colour, optics, voxel media, occluders and the GPU context.
 //!
 //! **Input → output.** A scene and a camera → per-pixel buffers (an HDR colour image, the distance
 //! along each pixel's view ray: [`gbuffer`]), which the techniques in `crate::stages` turn into their
 //! images; or EXR files of another renderer in their place.
 //!
 //! - [`gbuffer`]: scene + camera → distance and vacuum colour buffers.
-//! - [`color`]: Rec. 709 luminance (one home).
+//! - [`color`]: Rec. 709 luminance (one home) and the per-channel [`color::Rgb`] triple.
+//! - [`voxel`]: voxel media and directional lights (POP and its grid Monte-Carlo reference).
+//! - [`occluder`]: opaque geometry as a segment/ray blocking query (POP and its reference).
 //! - [`optics`]: Fresnel reflectance, refraction, reflection at smooth dielectric interfaces (one home).
 //! - [`gpu`]: device choice, wgpu context, shader validation (the passes live with their techniques).
 //!
@@ -17,7 +19,9 @@
 pub mod color;
 pub mod gbuffer;
 pub mod gpu;
+pub mod occluder;
 pub mod optics;
+pub mod voxel;
 
 use glam::DVec3;
 

@@ -10,10 +10,10 @@ use super::{CameraOptions, ReferenceImage, Walk, light_dir, roulette, seed_hash,
 use crate::physics::hg::{phase, sample_mu};
 use crate::physics::rng::{Draws, SampleStream, StreamKey};
 use crate::render::ViewCamera;
+use crate::render::color::Rgb;
+use crate::render::occluder::{NoOccluder, Occluder};
+use crate::render::voxel::{DirectionalLight, VoxelMedium};
 use crate::stages::pop::environment::{EnvMap, EnvSampler};
-use crate::stages::pop::grid::Rgb;
-use crate::stages::pop::grid::{NoOccluder, Occluder};
-use crate::stages::pop::medium::{DirectionalLight, VoxelMedium};
 
 /// One pixel's result.
 struct Pixel {

@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 
-use crate::stages::pop::medium::VoxelMedium;
+use crate::render::voxel::VoxelMedium;
 
 /// A uniform grid of `dims` cells of size `size` from `min` (voxels or tally cells).
 #[derive(Debug, Clone, Copy)]

@@ -9,7 +9,7 @@ use super::grid::{Grid, Voxels, rotate};
 use super::{LightTraceOptions, RadianceTally, TallySpec, Walk, Welford, light_dir, roulette, seed_hash, walks};
 use crate::physics::hg::sample_mu;
 use crate::physics::rng::{Draws, StreamKey};
-use crate::stages::pop::medium::{DirectionalLight, VoxelMedium};
+use crate::render::voxel::{DirectionalLight, VoxelMedium};
 
 /// Batches for the standard errors.
 const BATCHES: u64 = 64;

@@ -70,7 +70,7 @@
 //!
 //! **Environment** ([`render_environment`]). The same camera paths lit by an
 //! [`EnvMap`](crate::stages::pop::environment::EnvMap) instead of a directional light, with the opaque
-//! surfaces of an [`Occluder`](crate::stages::pop::grid::Occluder) (black: a path that reaches one
+//! surfaces of an [`Occluder`](crate::render::occluder::Occluder) (black: a path that reaches one
 //! ends; the eye ray ends at the G-buffer's surface distance). Next-event estimation draws a direction
 //! `w` from the map's importance sampler (density `p(w)` per steradian, positive everywhere) and adds
 //! `β·(σ_s/σ_t)·f_hg(w·ω_path)·L(w)·V(w)·exp(−σ_t ∫ density ds)/p(w)`, `V` the occluder's visibility.
@@ -107,7 +107,7 @@ use glam::DVec3;
 pub use camera::{render, render_environment};
 pub use light::light_trace;
 
-use crate::stages::pop::medium::{DirectionalLight, VoxelMedium};
+use crate::render::voxel::{DirectionalLight, VoxelMedium};
 
 /// The tally grid and polar bins of [`light_trace`].
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -48,10 +48,14 @@ use std::time::Instant;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
-use super::grid::{Grid, Occluder, Rgb};
-use super::medium::{DirectionalLight, VoxelMedium};
+use super::grid::Grid;
+
+use crate::render::occluder::Occluder;
+
 use super::merge::merge_rectilinear;
 use super::propagate::{FlowTable, Observer, Propagation, Settings, isotropic_residuum, propagate_lobe};
+use crate::render::color::Rgb;
+use crate::render::voxel::{DirectionalLight, VoxelMedium};
 use crate::tables::pop_preset::ordinates::fibonacci_directions;
 
 /// Largest map side accepted (a 16k × 8k float map is 1.5 GiB as f64 RGB).

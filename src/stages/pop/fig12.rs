@@ -20,12 +20,14 @@ use std::time::Instant;
 use glam::DVec3;
 use serde::Serialize;
 
-use super::grid::{Grid, NoOccluder};
-use super::medium::{DirectionalLight, VoxelMedium};
+use super::grid::Grid;
+
 use super::propagate::{self, FlowTable, Observer, Settings};
 use super::render::{self, MarchOptions};
 use crate::reference::grid_mc::{self, CameraOptions, LightTraceOptions, TallySpec};
 use crate::render::ViewCamera;
+use crate::render::occluder::NoOccluder;
+use crate::render::voxel::{DirectionalLight, VoxelMedium};
 use crate::report::noisy::NoiseCorrected;
 
 /// The Fig. 12 scattering coefficient \[1/m\].

@@ -23,9 +23,11 @@ use std::time::Instant;
 
 use super::shaders;
 use crate::physics::hg;
+use crate::render::color::Rgb;
 use crate::render::gpu::context::{Gpu, GpuError, Pass, PassTime, Words};
-use crate::stages::pop::grid::{Grid, Occluder, Rgb};
-use crate::stages::pop::medium::DirectionalLight;
+use crate::render::occluder::Occluder;
+use crate::render::voxel::DirectionalLight;
+use crate::stages::pop::grid::Grid;
 use crate::stages::pop::propagate::{self, FlowTable, Observer, PhaseTimes, Propagation, Settings};
 
 fn vec4s(v: &[Rgb]) -> Vec<[f32; 4]> {

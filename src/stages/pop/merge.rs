@@ -11,12 +11,14 @@
 
 use rayon::prelude::*;
 
-use super::grid::{Grid, Rgb};
-use super::medium::VoxelMedium;
+use super::grid::Grid;
+
 use super::radial::RadialGrid;
 use super::radial_propagate::{PointDirect, RadialPropagation};
 use super::render::{self, Frame, MarchOptions, StepSource};
 use crate::render::ViewCamera;
+use crate::render::color::Rgb;
+use crate::render::voxel::VoxelMedium;
 
 /// Sums the radial fields into `target`'s cells (module doc).
 pub fn merge(target: &Grid, sources: &[(&RadialGrid, &[Rgb])]) -> Vec<Rgb> {

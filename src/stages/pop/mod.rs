@@ -8,7 +8,7 @@
 //!
 //! | module | paper |
 //! |---|---|
-//! | [`medium`] | the medium volume of Sec. 4 (voxels, per-channel `σ_s`, `σ_a`, `g`) |
+//! | [`crate::render::voxel`] | the medium volume of Sec. 4 (voxels, per-channel `σ_s`, `σ_a`, `g`) |
 //! | [`grid`] | Sec. 4 grid aligned with `d`, Sec. 4.2 medium downsampling, link factors of Eqs. 2 and 4 |
 //! | [`propagate`] | Sec. 4.1 sweep, Eqs. 2–6 iterations, Eqs. 7–8 accumulation, Sec. 5.4 residuum |
 //! | [`render`] | Sec. 4.4 joint-bilateral upsampling and front-to-back ray marching |
@@ -29,7 +29,6 @@ pub mod shaders;
 pub mod environment;
 pub mod fig12;
 pub mod grid;
-pub mod medium;
 pub mod merge;
 pub mod octa;
 pub mod propagate;

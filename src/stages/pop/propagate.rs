@@ -33,9 +33,13 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::grid::{Grid, Occluder, Rgb};
-use super::medium::DirectionalLight;
+use super::grid::Grid;
+
+use crate::render::occluder::Occluder;
+
 use crate::physics::hg;
+use crate::render::color::Rgb;
+use crate::render::voxel::DirectionalLight;
 
 /// The Eq. 2–3 partition tabulated on a uniform anisotropy axis `a ∈ [−1, 1]` (a POP preset's
 /// `flow` array), linearly interpolated.

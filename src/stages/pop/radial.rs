@@ -25,9 +25,13 @@
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::grid::{Cell, Occluder, Rgb, anisotropy_decay};
-use super::medium::VoxelMedium;
+use super::grid::{Cell, anisotropy_decay};
+
+use crate::render::occluder::Occluder;
+
 use super::octa;
+use crate::render::color::Rgb;
+use crate::render::voxel::VoxelMedium;
 
 /// No neighbour (the outermost shell's outward link).
 pub const NONE: usize = usize::MAX;

@@ -38,11 +38,13 @@ use std::time::Instant;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::grid::{Occluder, Rgb};
+use crate::render::occluder::Occluder;
+
 use super::octa;
 use super::propagate::{self, FlowTable, PhaseTimes, Settings};
 use super::radial::{NONE, RadialGrid, cell_solid_angle};
 use crate::physics::hg;
+use crate::render::color::Rgb;
 
 /// A spot light's cone (KHR_lights_punctual falloff).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -160,7 +162,7 @@ pub fn sub_rays(n: usize) -> usize {
 /// uncollided fluence and the first-scattered power.
 pub fn initialise(
     grid: &RadialGrid,
-    medium: &super::medium::VoxelMedium,
+    medium: &crate::render::voxel::VoxelMedium,
     light: &PointLight,
     occluder: &dyn Occluder,
 ) -> (Initialisation, Vec<Rgb>, Vec<Rgb>, Rgb) {
@@ -264,7 +266,7 @@ pub fn initialise(
 /// Runs the propagation toward an eye at `eye`.
 pub fn propagate(
     grid: &RadialGrid,
-    medium: &super::medium::VoxelMedium,
+    medium: &crate::render::voxel::VoxelMedium,
     light: &PointLight,
     occluder: &dyn Occluder,
     flow: &FlowTable,
@@ -409,7 +411,7 @@ pub struct PointDirect<'a> {
     /// The grid (shell radii, for the depth profile).
     pub grid: &'a RadialGrid,
     /// The medium.
-    pub medium: &'a super::medium::VoxelMedium,
+    pub medium: &'a crate::render::voxel::VoxelMedium,
     /// True when every voxel has the same density.
     pub uniform: bool,
 }

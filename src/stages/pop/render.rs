@@ -11,9 +11,11 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::grid::{Grid, Rgb};
-use super::medium::VoxelMedium;
+use super::grid::Grid;
+
 use crate::render::ViewCamera;
+use crate::render::color::Rgb;
+use crate::render::voxel::VoxelMedium;
 
 /// Ray-marching settings.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -37,11 +37,11 @@
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::grid::Rgb;
-use super::medium::{DirectionalLight, VoxelMedium};
 use super::octa;
 use super::radial_propagate::PointLight;
+use crate::render::color::Rgb;
 use crate::render::color::luminance;
+use crate::render::voxel::{DirectionalLight, VoxelMedium};
 use crate::scene::Scene;
 use crate::scene::bvh::{Ray, SceneBvh, SurfaceResponse};
 

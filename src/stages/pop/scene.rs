@@ -11,9 +11,9 @@
 
 use glam::DVec3;
 
-use super::grid::Occluder;
-use super::medium::{DirectionalLight, VoxelMedium};
 use super::radial_propagate::{PointLight, Spot};
+use crate::render::occluder::Occluder;
+use crate::render::voxel::{DirectionalLight, VoxelMedium};
 use crate::scene::bvh::SceneBvh;
 use crate::scene::{Boundary, LightKind, Scene};
 

@@ -2,11 +2,13 @@
 
 use glam::DVec3;
 
-use super::grid::{Grid, NoOccluder, Occluder, anisotropy_decay};
-use super::medium::{DirectionalLight, VoxelMedium};
+use super::grid::{Grid, anisotropy_decay};
+
 use super::propagate::{FlowTable, Observer, Settings, propagate};
 use super::render::{MarchOptions, march, upsample};
 use crate::render::ViewCamera;
+use crate::render::occluder::{NoOccluder, Occluder};
+use crate::render::voxel::{DirectionalLight, VoxelMedium};
 
 fn cube(sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {
     VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, ([sigma_s; 3], [sigma_a; 3], [g; 3])).unwrap()

@@ -7,13 +7,15 @@
 use glam::DVec3;
 
 use super::environment::{self, EnvMap, EnvSampler, OrdinateSet, procedural_sky};
-use super::grid::{Grid, NoOccluder, Rgb};
-use super::medium::VoxelMedium;
+use super::grid::Grid;
 use super::merge::merge_rectilinear;
 use super::propagate::{FlowTable, Observer, Settings, propagate, propagate_lobe};
 use super::render::{MarchOptions, march};
 use crate::reference::grid_mc::{self, CameraOptions};
 use crate::render::ViewCamera;
+use crate::render::color::Rgb;
+use crate::render::occluder::NoOccluder;
+use crate::render::voxel::VoxelMedium;
 use crate::tables::pop_preset::ordinates::{cell_quadrature, fibonacci_directions};
 
 const FOUR_PI: f64 = 4.0 * std::f64::consts::PI;
@@ -490,7 +492,7 @@ struct Window {
     cos: f64,
 }
 
-impl super::grid::Occluder for Window {
+impl crate::render::occluder::Occluder for Window {
     fn segment_blocked(&self, _: DVec3, _: DVec3) -> bool {
         false
     }

@@ -9,7 +9,7 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use glam::{DMat3, DQuat, DVec3};
 
 use super::environment::{self, EnvMap, EnvSampler, OrdinateSet, UNIFORM_DOME_SIZE, dome_map, procedural_sky};
-use super::grid::Rgb;
+use crate::render::color::Rgb;
 use crate::scene::EnvironmentLight;
 
 /// OpenEXR's latitude–longitude map as the UsdLux DomeLight documentation quotes it, written here from

@@ -5,14 +5,16 @@ use std::f64::consts::PI;
 
 use glam::DVec3;
 
-use super::grid::{Grid, NoOccluder, Occluder};
-use super::medium::VoxelMedium;
+use super::grid::Grid;
+
 use super::merge;
 use super::propagate::{FlowTable, Settings};
 use super::radial::{RadialGrid, shell_radii};
 use super::radial_propagate::{self as rp, PointLight, inverse_square_integral};
 use super::render::MarchOptions;
 use crate::render::ViewCamera;
+use crate::render::occluder::{NoOccluder, Occluder};
+use crate::render::voxel::VoxelMedium;
 
 fn medium(half: f64, sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {
     VoxelMedium::homogeneous(DVec3::splat(-half), DVec3::splat(half), ([sigma_s; 3], [sigma_a; 3], [g; 3])).unwrap()

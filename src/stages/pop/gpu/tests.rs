@@ -6,10 +6,10 @@ use glam::DVec3;
 
 use super::*;
 use crate::render::gpu::context::test_gpu;
+use crate::render::occluder::NoOccluder;
+use crate::render::voxel::VoxelMedium;
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
-use crate::stages::pop::grid::NoOccluder;
-use crate::stages::pop::medium::VoxelMedium;
 use crate::stages::pop::scene::{BvhOccluder, scene_media};
 
 fn cube(sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {

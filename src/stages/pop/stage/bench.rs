@@ -10,9 +10,9 @@ use super::*;
 fn env_residuum_bench(
     id: &str,
     table: &PopPresetTable,
-    medium: &crate::stages::pop::medium::VoxelMedium,
+    medium: &crate::render::voxel::VoxelMedium,
 ) -> Result<(String, crate::stages::BenchRow), String> {
-    use crate::stages::pop::grid::NoOccluder;
+    use crate::render::occluder::NoOccluder;
     let sky = environment::bundled_sky();
     let ords = environment::ordinates(&sky, table.def.ordinates as usize, OrdinateSet::Importance);
     let cam = crate::stages::pop::fig12::camera(48, 48).ok_or("the Fig. 12 camera could not be built")?;
@@ -76,7 +76,8 @@ impl PopRender {
     /// the preset's grid): converged anisotropic propagation against the switch at Eq. 10's `m'`, with the
     /// relative RMS difference of their collided fluence.
     pub fn bench(&self, id: &str, ctx: &StageContext) -> Result<(String, Vec<crate::stages::BenchRow>), StageError> {
-        use crate::stages::pop::{grid::NoOccluder, medium::VoxelMedium};
+        use crate::render::occluder::NoOccluder;
+        use crate::render::voxel::VoxelMedium;
         let fields = self.fields();
         let table = self.open_table(id, ctx)?;
         let v = fields.load(id, ctx, None)?;

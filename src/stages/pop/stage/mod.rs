@@ -323,8 +323,8 @@ fn preset_flow(table: &PopPresetTable) -> FlowTable {
 pub fn propagate_on(
     device: &crate::render::gpu::Device,
     grid: &Grid,
-    light: &crate::stages::pop::medium::DirectionalLight,
-    occluder: &dyn crate::stages::pop::grid::Occluder,
+    light: &crate::render::voxel::DirectionalLight,
+    occluder: &dyn crate::render::occluder::Occluder,
     flow: &FlowTable,
     settings: &Settings,
     eye: glam::DVec3,
@@ -744,7 +744,7 @@ impl PopRender {
             help: "fix the scene's medium and lights, or the stage's density_raw / density_dims".into(),
         };
         let raw = if !self.density_slices.is_empty() {
-            let (dims, values) = crate::stages::pop::medium::read_exr_slices(&ctx.base_dir.join(&self.density_slices))
+            let (dims, values) = crate::render::voxel::read_exr_slices(&ctx.base_dir.join(&self.density_slices))
                 .map_err(|message| StageError::Input {
                     stage: id.into(),
                     message,
@@ -755,8 +755,8 @@ impl PopRender {
             None
         } else {
             let dims = self.density_dims.map(|d| d as usize);
-            let values = crate::stages::pop::medium::read_raw_density(&ctx.base_dir.join(&self.density_raw), dims)
-                .map_err(fail)?;
+            let values =
+                crate::render::voxel::read_raw_density(&ctx.base_dir.join(&self.density_raw), dims).map_err(fail)?;
             Some(RawDensity { dims, values })
         };
         let ordinates = self.environment_ordinates as usize;

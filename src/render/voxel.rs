@@ -1,4 +1,6 @@
-//! Voxel media and directional lights for Principal-Ordinates Propagation (elek2014 Sec. 3–4).
+//! Voxel media and directional lights (elek2014 Sec. 3–4): the medium Principal-Ordinates
+//! Propagation (`stages::pop`) propagates through and the grid Monte-Carlo reference
+//! (`reference::grid_mc`) renders, so it lives on the render floor under both.
 //!
 //! **Input → output.** A world-space box, a density per voxel (piecewise constant, x fastest) and
 //! per-channel coefficients at density 1 → point and cell queries of `σ_s`, `σ_a` and `g`. This is
