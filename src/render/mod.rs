@@ -7,6 +7,7 @@
 //!
 //! - [`gbuffer`]: scene + camera → distance and vacuum colour buffers.
 //! - [`color`]: Rec. 709 luminance (one home) and the per-channel [`color::Rgb`] triple.
+//! - [`environment`]: latitude–longitude environment maps, their sampling, the dome and the bundled sky.
 //! - [`voxel`]: voxel media and directional lights (POP and its grid Monte-Carlo reference).
 //! - [`occluder`]: opaque geometry as a segment/ray blocking query (POP and its reference).
 //! - [`optics`]: Fresnel reflectance, refraction, reflection at smooth dielectric interfaces (one home).
@@ -17,6 +18,7 @@
 //! (`f32::INFINITY` for sky pixels), colours are linear RGB radiance \[W/(m²·sr)\].
 
 pub mod color;
+pub mod environment;
 pub mod gbuffer;
 pub mod gpu;
 pub mod occluder;

@@ -85,7 +85,7 @@ pub struct Scene {
 /// radiance arriving from world direction `ω` is `texel(ω) · color · scale` \[W/(m²·sr)\] per channel,
 /// `texel` read from a latitude–longitude texture (OpenEXR's convention in the map's frame: row 0 toward
 /// the map's +Y, the centre column toward its +Z, a quarter across toward its +X; the same as
-/// `stages::pop::environment`), or 1 without a texture (a uniform environment).
+/// `render::environment`), or 1 without a texture (a uniform environment).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EnvironmentLight {
     /// Prim path; every diagnostic uses it.

@@ -11,9 +11,9 @@ use crate::physics::hg::{phase, sample_mu};
 use crate::physics::rng::{Draws, SampleStream, StreamKey};
 use crate::render::ViewCamera;
 use crate::render::color::Rgb;
+use crate::render::environment::{EnvMap, EnvSampler};
 use crate::render::occluder::{NoOccluder, Occluder};
 use crate::render::voxel::{DirectionalLight, VoxelMedium};
-use crate::stages::pop::environment::{EnvMap, EnvSampler};
 
 /// One pixel's result.
 struct Pixel {

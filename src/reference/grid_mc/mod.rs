@@ -69,7 +69,7 @@
 //! count.
 //!
 //! **Environment** ([`render_environment`]). The same camera paths lit by an
-//! [`EnvMap`](crate::stages::pop::environment::EnvMap) instead of a directional light, with the opaque
+//! [`EnvMap`](crate::render::environment::EnvMap) instead of a directional light, with the opaque
 //! surfaces of an [`Occluder`](crate::render::occluder::Occluder) (black: a path that reaches one
 //! ends; the eye ray ends at the G-buffer's surface distance). Next-event estimation draws a direction
 //! `w` from the map's importance sampler (density `p(w)` per steradian, positive everywhere) and adds

@@ -5,7 +5,7 @@
 //! the image's top row is latitude +π/2 (the dome's +Y, its "top pole"), the left edge longitude +π, and
 //! the direction of latitude φ and longitude λ is `(cos φ sin λ, sin φ, cos φ cos λ)`, so longitude 0 (the
 //! centre column) looks toward +Z and longitude π/2 (a quarter across) toward +X. That is exactly
-//! `stages::pop::environment`'s map convention, so the dome's frame needs no fixed re-mapping: the map's
+//! `render::environment`'s map convention, so the dome's frame needs no fixed re-mapping: the map's
 //! world rotation is the prim's world transform (scale and translation removed: a dome is infinitely far
 //! away), with USD's stage frame (metres, Z-up → Y-up) applied like everywhere else. `DomeLight` keeps
 //! its pole on its own +Y whatever the stage's `upAxis`; `DomeLight_1`'s `poleAxis` first turns the dome

@@ -117,7 +117,7 @@ pub fn add_reflection_vpls(media: &mut SceneMedia, scene: &Scene, bvh: &SceneBvh
 #[derive(Debug, Clone)]
 pub struct Environment {
     /// The map (radiance, intensity applied).
-    pub map: super::environment::EnvMap,
+    pub map: crate::render::environment::EnvMap,
     /// Name for summaries (the file).
     pub name: String,
     /// Ordinates at most.

@@ -6,7 +6,7 @@
 
 use glam::DVec3;
 
-use super::environment::{self, EnvMap, EnvSampler, OrdinateSet, procedural_sky};
+use super::environment::{self, OrdinateSet};
 use super::grid::Grid;
 use super::merge::merge_rectilinear;
 use super::propagate::{FlowTable, Observer, Settings, propagate, propagate_lobe};
@@ -14,6 +14,7 @@ use super::render::{MarchOptions, march};
 use crate::reference::grid_mc::{self, CameraOptions};
 use crate::render::ViewCamera;
 use crate::render::color::Rgb;
+use crate::render::environment::{self as env_map, EnvMap, EnvSampler, procedural_sky};
 use crate::render::occluder::NoOccluder;
 use crate::render::voxel::VoxelMedium;
 use crate::tables::pop_preset::ordinates::{cell_quadrature, fibonacci_directions};
@@ -370,7 +371,7 @@ fn the_bundled_sky_file_is_the_procedural_sky() {
     // describes (f32 storage of the f64 values).
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/sky.exr");
     let file = EnvMap::read_exr(&path, 1.0).unwrap();
-    let want = environment::bundled_sky();
+    let want = env_map::bundled_sky();
     assert_eq!((file.width, file.height), (want.width, want.height));
     for (a, b) in file.radiance.iter().zip(&want.radiance) {
         for c in 0..3 {

@@ -8,8 +8,9 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 use glam::{DMat3, DQuat, DVec3};
 
-use super::environment::{self, EnvMap, EnvSampler, OrdinateSet, UNIFORM_DOME_SIZE, dome_map, procedural_sky};
+use super::environment::{self, OrdinateSet};
 use crate::render::color::Rgb;
+use crate::render::environment::{self as env_map, EnvMap, EnvSampler, UNIFORM_DOME_SIZE, dome_map, procedural_sky};
 use crate::scene::EnvironmentLight;
 
 /// OpenEXR's latitude–longitude map as the UsdLux DomeLight documentation quotes it, written here from
@@ -172,7 +173,7 @@ fn non_rotations_and_bad_tints_are_refused() {
     assert!(base.clone().tinted([1.0, -1.0, 1.0]).unwrap_err().contains("non-negative"));
     assert!(base.clone().tinted([f64::INFINITY, 1.0, 1.0]).is_err());
     // A side too large is refused before anything is allocated.
-    assert!(EnvMap::uniform(environment::MAX_SIDE + 1, 1, [1.0; 3]).is_err());
+    assert!(EnvMap::uniform(env_map::MAX_SIDE + 1, 1, [1.0; 3]).is_err());
 }
 
 #[test]

@@ -9,9 +9,10 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 
 use super::{assert_close, assert_warns, load, warnings_at, write};
+use crate::render::environment::dome_map;
 use crate::scene::usd_import::import;
 use crate::scene::{EnvironmentLight, Scene};
-use crate::stages::pop::environment::{self, OrdinateSet, dome_map};
+use crate::stages::pop::environment::{self, OrdinateSet};
 
 pub(super) const DOME_TEXTURED: &str = r#"#usda 1.0
 (

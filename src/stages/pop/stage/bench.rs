@@ -13,7 +13,7 @@ fn env_residuum_bench(
     medium: &crate::render::voxel::VoxelMedium,
 ) -> Result<(String, crate::stages::BenchRow), String> {
     use crate::render::occluder::NoOccluder;
-    let sky = environment::bundled_sky();
+    let sky = crate::render::environment::bundled_sky();
     let ords = environment::ordinates(&sky, table.def.ordinates as usize, OrdinateSet::Importance);
     let cam = crate::stages::pop::fig12::camera(48, 48).ok_or("the Fig. 12 camera could not be built")?;
     let flow = preset_flow(table);

@@ -10,7 +10,7 @@
 //! density volume spanning the scene's bounds), its lights and optionally an environment: the stage's
 //! latitude–longitude EXR `environment` map or, when that field is empty, the scene's USD `DomeLight`
 //! (its texture × intensity, rotated as the dome is; a uniform map without a texture; see
-//! [`environment::dome_map`]). When both are present the stage's map wins and `skipped` in
+//! [`env_map::dome_map`]). When both are present the stage's map wins and `skipped` in
 //! `summary.json` says the dome was overridden; an unreadable dome texture is an error naming the USD
 //! file, the prim and the texture. The id of a compiled `PopPreset` table (grid, iterations, ε_L, ε_a,
 //! residuum switch, flow table). **Phases** (elek2014 Fig. 14 names, in
@@ -33,11 +33,12 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
+use crate::render::environment::{self as env_map, EnvMap};
 use crate::render::{Image, RgbImage, ViewCamera};
 use crate::report::noisy::NoiseCorrected;
 use crate::scene::bvh::SceneBvh;
 use crate::scene::{EnvironmentLight, Scene};
-use crate::stages::pop::environment::{self, EnvMap, EnvOrdinate, OrdinateSet};
+use crate::stages::pop::environment::{self, EnvOrdinate, OrdinateSet};
 use crate::stages::pop::grid::Grid;
 use crate::stages::pop::merge;
 use crate::stages::pop::propagate::{self, FlowTable, Observer, PhaseTimes, Settings};
@@ -612,10 +613,10 @@ fn render_environment(
     Ok((PointFrame { frame, march_ms: ms(t0) }, summary))
 }
 
-/// The environment map of the scene's dome light ([`environment::dome_map`]); a texture that cannot be
+/// The environment map of the scene's dome light ([`env_map::dome_map`]); a texture that cannot be
 /// read is an input error naming the scene file, the prim and the texture, with the fix.
 fn dome_environment(id: &str, scene: &Scene, dome: &EnvironmentLight) -> Result<EnvMap, StageError> {
-    environment::dome_map(dome).map_err(|e| {
+    env_map::dome_map(dome).map_err(|e| {
         let texture = dome.texture.as_ref().map_or("(none)".to_string(), |t| t.display().to_string());
         StageError::Input {
             stage: id.into(),
