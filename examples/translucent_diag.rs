@@ -23,11 +23,11 @@ use std::time::Instant;
 
 use voltab::reference::translucent::{self as reference, ReferenceOptions};
 use voltab::render::ViewCamera;
+use voltab::render::dielectric::{Material, Setup, emitters, find_object};
 use voltab::scene::Scene;
 use voltab::scene::bvh::SceneBvh;
 use voltab::stages::translucent::points::PointOptions;
 use voltab::stages::translucent::render::{self, RenderOptions};
-use voltab::stages::translucent::{Material, Setup, emitters, find_object};
 use voltab::tables::ms_lobes::MsLobesTable;
 
 type Img = Vec<[f64; 3]>;

@@ -578,9 +578,9 @@ fn pop_lacks(sc: &Scene) -> Option<&'static str> {
 /// point or sphere light.
 fn translucent_lacks(sc: &Scene, t: &crate::stages::translucent::TranslucentRender) -> Option<&'static str> {
     let bvh = crate::scene::bvh::SceneBvh::build(sc);
-    if crate::stages::translucent::find_object(sc, &bvh).is_none() {
+    if crate::render::dielectric::find_object(sc, &bvh).is_none() {
         Some("closed dielectric mesh bounding a medium")
-    } else if crate::stages::translucent::emitters(sc, t.light_radius).0.is_empty() {
+    } else if crate::render::dielectric::emitters(sc, t.light_radius).0.is_empty() {
         Some("point or sphere light")
     } else {
         None

@@ -7,6 +7,8 @@
 //!
 //! - [`gbuffer`]: scene + camera → distance and vacuum colour buffers.
 //! - [`color`]: Rec. 709 luminance (one home) and the per-channel [`color::Rgb`] triple.
+//! - [`dielectric`]: a medium inside a smooth dielectric boundary, spherical emitters and the setup the
+//!   translucent renderer and its reference read.
 //! - [`environment`]: latitude–longitude environment maps, their sampling, the dome and the bundled sky.
 //! - [`voxel`]: voxel media and directional lights (POP and its grid Monte-Carlo reference).
 //! - [`occluder`]: opaque geometry as a segment/ray blocking query (POP and its reference).
@@ -18,6 +20,7 @@
 //! (`f32::INFINITY` for sky pixels), colours are linear RGB radiance \[W/(m²·sr)\].
 
 pub mod color;
+pub mod dielectric;
 pub mod environment;
 pub mod gbuffer;
 pub mod gpu;

@@ -1,7 +1,7 @@
 //! Brute-force volumetric path tracer for a homogeneous medium inside a smooth dielectric mesh: the
 //! independent ground truth the point-based renderer ([`crate::stages::translucent::render`]) is judged against.
 //!
-//! **Input → output.** A [`Setup`] (scene, BVH, translucent mesh, its [`crate::stages::translucent::Material`], spherical
+//! **Input → output.** A [`Setup`] (scene, BVH, translucent mesh, its [`crate::render::dielectric::Material`], spherical
 //! [`Emitter`]s), a [`ViewCamera`] and [`ReferenceOptions`] → a [`ReferenceImage`]: per pixel the mean
 //! radiance \[W/(m²·sr)\] split by the number of scattering events in the medium (none, one, two, three
 //! or more), the variance of the mean of the total, and whether the pixel sees the object first. It
@@ -71,7 +71,7 @@
 //! pixel's paths are accumulated in order, so images are bit-identical for any thread count. A path
 //! whose contribution is not finite is dropped and counted in [`ReferenceImage::nonfinite`]; a pixel
 //! whose ray has a non-finite or zero origin or direction gets 0 and all its paths count as non-finite.
-//! An invalid material ([`crate::stages::translucent::Material::check`]) gives an image of zeros with every path counted as
+//! An invalid material ([`crate::render::dielectric::Material::check`]) gives an image of zeros with every path counted as
 //! non-finite. Invalid emitters (non-finite, radius ≤ 0, negative radiance) are ignored.
 
 use std::f64::consts::PI;
@@ -84,9 +84,9 @@ use rayon::prelude::*;
 use crate::physics::hg;
 use crate::physics::rng::{Draws, StreamKey};
 use crate::render::ViewCamera;
+use crate::render::dielectric::{Emitter, Material, Setup};
 use crate::render::optics::{fresnel, reflect, refract};
 use crate::scene::bvh::{Hit, Ray};
-use crate::stages::translucent::{Emitter, Material, Setup};
 
 /// Fixed-point iterations of the light-guided direction through the refractive boundary.
 pub const GUIDE_ITERATIONS: usize = 3;

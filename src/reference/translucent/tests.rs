@@ -189,7 +189,7 @@ fn agrees_with_volpath() {
         radiance: [1.0, 2.0, 3.0],
     });
     let bvh = SceneBvh::build(&s);
-    let (object, ior) = crate::stages::translucent::find_object(&s, &bvh).unwrap();
+    let (object, ior) = crate::render::dielectric::find_object(&s, &bvh).unwrap();
     let md = &s.media[0];
     let m = Material {
         sigma_t: [0, 1, 2].map(|c| md.sigma_s[c] + md.sigma_a[c]),
@@ -197,7 +197,7 @@ fn agrees_with_volpath() {
         g: md.g[0],
         ior,
     };
-    let (em, skipped) = crate::stages::translucent::emitters(&s, 0.02);
+    let (em, skipped) = crate::render::dielectric::emitters(&s, 0.02);
     assert!(skipped.is_empty() && em.len() == 1);
     let cam = ViewCamera::new([0.0, 0.0, 3.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 0.1, 3, 1).unwrap();
     let setup = Setup { scene: &s, bvh: &bvh, object, material: m, emitters: &em };
@@ -359,8 +359,8 @@ fn bundled_scene_timing() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/translucent.gltf");
     let scene = Scene::load(&path).unwrap();
     let bvh = SceneBvh::build(&scene);
-    let (object, _) = crate::stages::translucent::find_object(&scene, &bvh).unwrap();
-    let (em, _) = crate::stages::translucent::emitters(&scene, 0.02);
+    let (object, _) = crate::render::dielectric::find_object(&scene, &bvh).unwrap();
+    let (em, _) = crate::render::dielectric::emitters(&scene, 0.02);
     let cam = ViewCamera::from_scene(&scene.cameras[0], 96, 64).unwrap();
     let spp: u32 = std::env::var("VOLTAB_REF_SPP").ok().and_then(|v| v.parse().ok()).unwrap_or(64);
     for name in ["Wax", "Oil", "Skin"] {

@@ -35,10 +35,10 @@ use std::f64::consts::PI;
 
 use glam::DVec3;
 
-use super::Setup;
 use super::points::VolumeSample;
 use crate::physics::hg;
 use crate::physics::rng::{Draws, SampleStream};
+use crate::render::dielectric::Setup;
 use crate::render::optics::{fresnel, reflect, refract};
 use crate::scene::Surface;
 use crate::scene::bvh::Ray;
@@ -284,7 +284,11 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
     let scene = ball_over_ground(0.05);
     let bvh = SceneBvh::build(&scene);
     let r = 0.005;
-    let lamp = [super::Emitter { center: DVec3::new(0.0, 1.2, 0.0), radius: r, radiance: [1.0 / (PI * r * r); 3] }];
+    let lamp = [crate::render::dielectric::Emitter {
+        center: DVec3::new(0.0, 1.2, 0.0),
+        radius: r,
+        radiance: [1.0 / (PI * r * r); 3],
+    }];
     let cases = [
         ("glow", "α = 1, g = 0.99, σ_t = 1e-3 /m", 1.0, 0.99, 1e-3, 0.0, 1e-3),
         ("glow", "α = 1, g = −0.99, σ_t = 1e4 /m", 1.0, -0.99, 1e4, 0.0, 1.0),
@@ -292,8 +296,12 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
         ("caustic", "α = 0, σ_t = 1e-9 /m, η = 1", 0.0, 0.0, 1e-9, 0.95, 1.0),
     ];
     for (what, input, albedo, g, sigma, lo, hi) in cases {
-        let material =
-            super::Material { sigma_t: [sigma; 3], albedo: [albedo; 3], g, ior: if albedo > 0.0 { 1.5 } else { 1.0 } };
+        let material = crate::render::dielectric::Material {
+            sigma_t: [sigma; 3],
+            albedo: [albedo; 3],
+            g,
+            ior: if albedo > 0.0 { 1.5 } else { 1.0 },
+        };
         let setup = Setup { scene: &scene, bvh: &bvh, object: 0, material, emitters: &lamp };
         let opts = super::points::PointOptions { surface_samples: 256, indirect_rays: 0, ..Default::default() };
         let value = match super::points::generate(&setup, &opts) {

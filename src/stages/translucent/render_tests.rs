@@ -5,9 +5,9 @@ use glam::DVec3;
 
 use super::points::PointOptions;
 use super::render::{Frame, RenderOptions, prepare, render};
-use super::{Emitter, Material, Setup};
 use crate::reference::translucent::{self as reference, ReferenceOptions};
 use crate::render::ViewCamera;
+use crate::render::dielectric::{Emitter, Material, Setup};
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
 use crate::scene::bvh::procedural::icosphere;

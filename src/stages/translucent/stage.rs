@@ -28,6 +28,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::reference::translucent::{self as reference, ReferenceOptions};
+use crate::render::dielectric::{Emitter, Material, Setup, emitters, find_object};
 use crate::render::{Image, RgbImage, ViewCamera};
 use crate::report::noisy::NoiseCorrected;
 use crate::report::plot::{Plot, Scale, Series, write_png};
@@ -37,7 +38,6 @@ use crate::stages::BenchRow;
 use crate::stages::translucent::compare::{self, Comparison};
 use crate::stages::translucent::points::PointOptions;
 use crate::stages::translucent::render::{self, RenderOptions};
-use crate::stages::translucent::{Emitter, Material, Setup, emitters, find_object};
 use crate::stages::view::{self, ms};
 use crate::stages::{StageContext, StageError, StageOutcome};
 use crate::tables::FieldIssue;

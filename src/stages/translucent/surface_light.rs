@@ -29,7 +29,7 @@ use rayon::prelude::*;
 use super::octree::{CutEntry, Octree};
 use super::points::SurfaceSample;
 use super::render::solid_angle;
-use super::{Material, Setup};
+use crate::render::dielectric::{Material, Setup};
 use crate::scene::bvh::Ray;
 use crate::tables::ms_lobes::LobeSlice;
 

@@ -1,7 +1,7 @@
 use super::*;
+use crate::render::dielectric::{Emitter, Material};
 use crate::scene::bvh::SceneBvh;
 use crate::stages::translucent::points::{PointOptions, generate};
-use crate::stages::translucent::{Emitter, Material};
 
 /// An index-matched absorber ball under a lamp straight above: below its centre the caustic map
 /// gives the lamp's irradiance times `e^{−σ_t·2R}` (no Fresnel, no refraction, no scattering), and no

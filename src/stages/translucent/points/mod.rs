@@ -42,8 +42,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::object_light::{CAUSTIC_K, GLOW_K, ObjectLight, Photon, PhotonMap, glow_photon, land, receives};
-use super::{Emitter, Setup};
 use crate::physics::rng::StreamKey;
+use crate::render::dielectric::{Emitter, Setup};
 use crate::render::optics::{fresnel, reflect, refract};
 use crate::scene::bvh::{Hit, Ray};
 

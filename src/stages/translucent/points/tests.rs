@@ -1,8 +1,8 @@
 use super::elimination::*;
 use super::*;
+use crate::render::dielectric::Material;
 use crate::scene::bvh::{SceneBvh, procedural};
 use crate::scene::{Material as SceneMaterial, Mesh, Scene, Surface};
-use crate::stages::translucent::Material;
 
 fn mat(sigma: [f64; 3], ior: f64) -> Material {
     Material { sigma_t: sigma, albedo: [0.9; 3], g: 0.0, ior }
@@ -444,8 +444,8 @@ fn bundled_scene_timing() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/translucent.gltf");
     let scene = Scene::load(&path).unwrap();
     let bvh = SceneBvh::build(&scene);
-    let (object, _) = crate::stages::translucent::find_object(&scene, &bvh).unwrap();
-    let (em, _) = crate::stages::translucent::emitters(&scene, 0.02);
+    let (object, _) = crate::render::dielectric::find_object(&scene, &bvh).unwrap();
+    let (em, _) = crate::render::dielectric::emitters(&scene, 0.02);
     let setup = Setup {
         scene: &scene,
         bvh: &bvh,

@@ -161,8 +161,11 @@ fn scene_ray_rows() -> Vec<crate::stability::Row> {
     let scene = super::super::object_light::ball_over_ground(0.05);
     let bvh = crate::scene::bvh::SceneBvh::build(&scene);
     let (r, i) = (0.005, 1.0);
-    let lamp =
-        [super::super::Emitter { center: DVec3::new(0.3, 0.8, 0.0), radius: r, radiance: [i / (PI * r * r); 3] }];
+    let lamp = [crate::render::dielectric::Emitter {
+        center: DVec3::new(0.3, 0.8, 0.0),
+        radius: r,
+        radiance: [i / (PI * r * r); 3],
+    }];
     let l_max = 0.5 / PI * i / (0.8 * 0.8);
     let light = ObjectLight::default();
     let opts = RenderOptions { scene_rays: 64, ..RenderOptions::default() };

@@ -195,7 +195,7 @@ fn scene_rays_match_quadrature_through_an_index_matched_ball() {
     let (c, radius, rho) = (DVec3::new(0.0, 0.15, 0.0), 0.1, 0.5);
     let (r, i) = (0.002, 2.0);
     let lamp_at = DVec3::new(0.5, 0.7, 0.2);
-    let lamp = [super::super::Emitter { center: lamp_at, radius: r, radiance: [i / (PI * r * r); 3] }];
+    let lamp = [crate::render::dielectric::Emitter { center: lamp_at, radius: r, radiance: [i / (PI * r * r); 3] }];
     let material = Material { sigma_t: [5.0, 10.0, 20.0], albedo: [0.9, 0.5, 0.2], g: 0.7, ior: 1.0 };
     let setup = Setup { scene: &scene, bvh: &bvh, object: 0, material, emitters: &lamp };
     let light = ObjectLight::default();

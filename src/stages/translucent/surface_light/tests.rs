@@ -1,8 +1,8 @@
 use super::*;
+use crate::render::dielectric::Emitter;
 use crate::scene::bvh::SceneBvh;
 use crate::scene::bvh::procedural::icosphere;
 use crate::scene::fixtures::empty;
-use crate::stages::translucent::Emitter;
 use crate::stages::translucent::octree::Item;
 use crate::tables::ms_lobes::{MediumChannel, MsLobes, MsLobesTable};
 
