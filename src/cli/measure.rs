@@ -163,8 +163,21 @@ pub fn stability(a: StabilityArgs) -> Result<ExitCode> {
 pub fn export(what: ExportCommand) -> Result<ExitCode> {
     let ExportCommand::Mitsuba { file, out, camera, width, height, spp, texels } = what;
     let scene = load_scene(&file)?;
-    let options = voltab::reference::mitsuba::ExportOptions { camera, width, height, spp, texels };
+    // The bake's own texels (computed first: a scene without lightmap UVs fails before anything is written).
+    let texel_set =
+        (texels > 0).then(|| voltab::validation::texels::texels(&scene, texels)).transpose().map_err(|e| {
+            anyhow::anyhow!(
+                "{e}\n  help: give the scene's meshes lightmap UVs (glTF TEXCOORD_1, USD st1) or leave out --texels"
+            )
+        })?;
+    let options = voltab::reference::mitsuba::ExportOptions { camera, width, height, spp };
     let m = voltab::reference::mitsuba::export(&scene, &options, &out).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if let Some(set) = texel_set {
+        let path = out.join("texels.json");
+        let json = serde_json::to_string(&set)?;
+        voltab::cache::write_atomic(&path, format!("{json}\n").as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     println!(
         "wrote {} ({} shapes, {} media, {} lights)",
         out.join(&m.scene_xml).display(),

@@ -174,7 +174,7 @@ fn god_rays(
         quantity: "in-scattered radiance image (single scattering)".into(),
         scene,
         minus_scene: None,
-        export: ExportOptions { camera: Some(camera), width, height: Some(height), spp, texels: 0 },
+        export: ExportOptions { camera: Some(camera), width, height: Some(height), spp },
         query: Query::Image { width, height, spp, max_depth: vec![2], minus_depth: Some(1), block: None },
         methods,
         caveats,
@@ -256,7 +256,7 @@ fn image_fog(
         Quality::Full => (4096, 1024),
     };
     let (scene, camera) = scene_and_camera(id, &stage.scene_path(ctx.base_dir), stage.camera)?;
-    let export = ExportOptions { camera: Some(camera), width, height: Some(height), spp, texels: 0 };
+    let export = ExportOptions { camera: Some(camera), width, height: Some(height), spp };
     // Mitsuba's vacuum image: the colour buffer the effect filters.
     let mut vacuum = scene.clone();
     vacuum.media.clear();
@@ -379,7 +379,7 @@ fn pop_render(
         quantity: "light scattered in the medium (all orders), 4×4-pixel blocks".into(),
         scene,
         minus_scene: Some(absorbing),
-        export: ExportOptions { camera: Some(camera), width, height: Some(height), spp, texels: 0 },
+        export: ExportOptions { camera: Some(camera), width, height: Some(height), spp },
         query: Query::Image { width, height, spp, max_depth: vec![-1], minus_depth: None, block: Some(4) },
         methods: vec![Method {
             name: "pop".into(),
@@ -515,7 +515,7 @@ fn translucent(
             quantity: format!("image of the object in {name} (all transport), 4×4-pixel blocks"),
             scene: sc,
             minus_scene: None,
-            export: ExportOptions { camera: Some(camera.clone()), width, height: Some(height), spp, texels: 0 },
+            export: ExportOptions { camera: Some(camera.clone()), width, height: Some(height), spp },
             query: Query::Image { width, height, spp, max_depth: vec![-1], minus_depth: None, block: Some(4) },
             methods,
             caveats: caveats.clone(),

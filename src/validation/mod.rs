@@ -17,6 +17,7 @@
 
 pub mod cases;
 pub mod python;
+pub mod texels;
 
 use std::path::{Path, PathBuf};
 

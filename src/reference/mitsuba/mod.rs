@@ -6,9 +6,9 @@
 //! [`ExportOptions`] → a folder with `scene.xml` (Mitsuba 3 XML, format 3.0.0), `meshes/*.ply` (binary,
 //! world space), `volumes/*.vol` (Mitsuba grid volumes, for exponential height fog) and `export.json`
 //! ([`Manifest`]: what became what, the unit conventions, the region the global medium fills, warnings for
-//! what Mitsuba cannot represent exactly), and with `--texels N` `texels.json` (the bake's texels, see
-//! [`texels`]). Every file is written to a temporary name and renamed, and
-//! `export.json` is written last.
+//! what Mitsuba cannot represent exactly). Every file is written to a temporary name and renamed, and
+//! `export.json` is written last. (`voltab export --texels N` adds `texels.json`, the bake's own texels,
+//! from `crate::validation::texels`: the bake is a method, so the reference never runs it.)
 //!
 //! **Mapping** (units carry over unchanged; voltab's and Mitsuba's conventions coincide):
 //! - point: `point` `intensity` = voltab intensity \[W/sr\]; directional: `directional` `irradiance` \[W/m²\]
@@ -38,7 +38,6 @@
 mod build;
 mod geometry;
 pub mod ply;
-pub mod texels;
 pub mod vol;
 pub mod xml;
 
@@ -70,13 +69,11 @@ pub struct ExportOptions {
     pub height: Option<u32>,
     /// Default samples per pixel.
     pub spp: u32,
-    /// Texels of the lightmap bake to write to `texels.json` ([`texels`]); 0: none.
-    pub texels: usize,
 }
 
 impl Default for ExportOptions {
     fn default() -> Self {
-        ExportOptions { camera: None, width: 256, height: None, spp: 64, texels: 0 }
+        ExportOptions { camera: None, width: 256, height: None, spp: 64 }
     }
 }
 
@@ -92,9 +89,6 @@ pub enum ExportError {
         /// The operating system's message.
         message: String,
     },
-    /// The bake's texels could not be computed (`--texels`).
-    #[error("{0}\n  help: give the scene's meshes lightmap UVs (glTF TEXCOORD_1, USD st1) or leave out --texels")]
-    Texels(String),
     /// `--camera` names no camera of the scene.
     #[error("{}: no camera named \"{name}\"\n  help: the scene's cameras are: {}", scene.display(), if available.is_empty() { "(none)".to_string() } else { available.join(", ") })]
     UnknownCamera {
@@ -238,11 +232,6 @@ pub struct Manifest {
 /// Exports `scene` into `out` (created when missing; files of an earlier export are replaced).
 pub fn export(scene: &Scene, options: &ExportOptions, out: &Path) -> Result<Manifest, ExportError> {
     let built = build(scene, options)?;
-    if options.texels > 0 {
-        let set = texels::texels(scene, options.texels).map_err(ExportError::Texels)?;
-        let json = serde_json::to_string(&set).expect("the texel set serialises");
-        write_atomic(&out.join("texels.json"), format!("{json}\n").as_bytes())?;
-    }
     for (rel, bytes) in &built.files {
         write_atomic(&out.join(rel), bytes)?;
     }

@@ -1,5 +1,6 @@
 //! The lightmap bake's own texels, for judging the bake against Mitsuba at exactly the points it bakes
-//! (issue 30 for issue 31's targets).
+//! (issue 30 for issue 31's targets). It runs the bake (a method), so it lives in the validation layer
+//! above the stages, not in `reference::mitsuba`, which only exports the scene.
 //!
 //! **Input → output.** A scene with lightmap UVs and a texel count → [`TexelSet`] (`texels.json` beside the
 //! export): every k-th inside texel of the bake's atlas at its default density (the subset the stage's own
