@@ -9,6 +9,8 @@
 
 use std::time::Instant;
 
+use glam::DVec3;
+
 use crate::compile::{CompileError, CompileOptions, compile, encode_table};
 use crate::container::ContainerError;
 use crate::pipeline::Limits;
@@ -411,36 +413,39 @@ pub fn ray_rows(triangles: usize) -> Result<Vec<BenchRow>, BenchError> {
     });
 
     let Some((lo, hi)) = scene.bounds() else { return Ok(rows) };
-    let center = [0, 1, 2].map(|c| 0.5 * (lo[c] + hi[c]));
-    let size = [0, 1, 2].map(|c| hi[c] - lo[c]);
+    let (lo, hi) = (DVec3::from_array(lo), DVec3::from_array(hi));
+    let center = 0.5 * (lo + hi);
+    let size = hi - lo;
     let n = RAY_BENCH_IMAGE;
     // A camera above one edge of the field looking at its centre, 60° vertical field of view.
-    let eye = [center[0], hi[1] + 0.35 * size[0], lo[2] - 0.15 * size[2]];
-    let fwd = unit([0, 1, 2].map(|c| center[c] - eye[c]));
-    let right = unit(cross(fwd, [0.0, 1.0, 0.0]));
-    let up = cross(right, fwd);
+    let eye = DVec3::new(center.x, hi.y + 0.35 * size.x, lo.z - 0.15 * size.z);
+    let fwd = center - eye;
+    let fwd = fwd / fwd.length();
+    let right = fwd.cross(DVec3::Y);
+    let right = right / right.length();
+    let up = right.cross(fwd);
     let tan = (30f64).to_radians().tan();
     let primary: Vec<Ray> = (0..n * n)
         .map(|i| {
             let (x, y) = ((i % n) as f64 + 0.5, (i / n) as f64 + 0.5);
             let (sx, sy) = ((2.0 * x / n as f64 - 1.0) * tan, (1.0 - 2.0 * y / n as f64) * tan);
-            Ray::new(eye, [0, 1, 2].map(|c| fwd[c] + sx * right[c] + sy * up[c]))
+            Ray::new(eye.to_array(), (fwd + sx * right + sy * up).to_array())
         })
         .collect();
     let key = crate::physics::rng::StreamKey { table: 0x7a7e_5eed, cell: 1 };
     let incoherent: Vec<Ray> = (0..(n * n) as u64)
         .map(|i| {
             let s = key.sample(i);
-            let o = [0, 1, 2].map(|c| lo[c] + size[c] * s.uniform(c as u32));
+            let o = lo + size * DVec3::new(s.uniform(0), s.uniform(1), s.uniform(2));
             let z = 2.0 * s.uniform(3) - 1.0;
             let phi = std::f64::consts::TAU * s.uniform(4);
             let r = (1.0 - z * z).max(0.0).sqrt();
-            Ray::new(o, [r * phi.cos(), z, r * phi.sin()])
+            Ray::new(o.to_array(), [r * phi.cos(), z, r * phi.sin()])
         })
         .collect();
     let hits = all.install(|| bvh.closest_hits(&primary));
-    let light = [center[0] + 0.2 * size[0], hi[1] + 0.5 * size[0], center[2] - 0.1 * size[2]];
-    let eps = 1e-4 * size.iter().fold(1.0f64, |m, &x| m.max(x));
+    let light = DVec3::new(center.x + 0.2 * size.x, hi.y + 0.5 * size.x, center.z - 0.1 * size.z);
+    let eps = 1e-4 * 1.0f64.max(size.x).max(size.y).max(size.z);
     let shadow: Vec<Ray> = hits
         .iter()
         .zip(&primary)
@@ -448,8 +453,10 @@ pub fn ray_rows(triangles: usize) -> Result<Vec<BenchRow>, BenchError> {
             let h = h.as_ref()?;
             // Offset the start along the normal, on the side the ray came from.
             let side = if h.front_face { 1.0 } else { -1.0 };
-            let p = [0, 1, 2].map(|c| r.origin[c] + h.t * r.direction[c] + side * eps * h.geometric_normal[c]);
-            Some(Ray { origin: p, direction: [0, 1, 2].map(|c| light[c] - p[c]), t_min: 0.0, t_max: 1.0 })
+            let p = DVec3::from_array(r.origin)
+                + h.t * DVec3::from_array(r.direction)
+                + side * eps * DVec3::from_array(h.geometric_normal);
+            Some(Ray { origin: p.to_array(), direction: (light - p).to_array(), t_min: 0.0, t_max: 1.0 })
         })
         .collect();
 
@@ -499,15 +506,6 @@ fn interleaved(
     a.sort_by(f64::total_cmp);
     b.sort_by(f64::total_cmp);
     (a[1], b[1], count)
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn unit(v: [f64; 3]) -> [f64; 3] {
-    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    v.map(|x| x / l)
 }
 
 /// The rows as a text table.

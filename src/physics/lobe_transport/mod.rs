@@ -44,6 +44,8 @@ mod tests;
 use std::f64::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use glam::DVec3;
+
 pub use closure::{collision_moments, decay_rate, remainder};
 
 use crate::physics::hg;
@@ -338,37 +340,24 @@ fn increments(cfg: &LobeConfig) -> Vec<Vec<u64>> {
         .collect()
 }
 
-pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-
 /// The local lobe frame at `p` (wang2018 Sec. 4.1): axis `â = p/|p|` (`+z` at the origin) and `ê₁`
 /// perpendicular to it in the plane of `â` and the beam axis, pointing away from the beam's side
 /// (`ê₁ = (z ρ̂ − ρ ẑ)/r`); `ê₂ = â × ê₁`. On the axis `ê₁ = x̂`.
-pub fn lobe_frame(p: [f64; 3]) -> ([f64; 3], [f64; 3], [f64; 3]) {
-    let r = norm(p);
-    let rho = (p[0] * p[0] + p[1] * p[1]).sqrt();
+pub fn lobe_frame(p: DVec3) -> (DVec3, DVec3, DVec3) {
+    let r = p.length();
+    let rho = (p.x * p.x + p.y * p.y).sqrt();
     if r.is_nan() || r <= 0.0 {
-        return ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+        return (DVec3::Z, DVec3::X, DVec3::Y);
     }
-    let a = [p[0] / r, p[1] / r, p[2] / r];
-    let rho_hat = if rho > 0.0 { [p[0] / rho, p[1] / rho, 0.0] } else { [1.0, 0.0, 0.0] };
+    let a = p / r;
     let e1 = if rho > 0.0 {
-        [(p[2] * rho_hat[0]) / r, (p[2] * rho_hat[1]) / r, -rho / r]
+        let (rho_x, rho_y) = (p.x / rho, p.y / rho);
+        DVec3::new((p.z * rho_x) / r, (p.z * rho_y) / r, -rho / r)
     } else {
         // On the axis every perpendicular is equivalent.
-        [1.0, 0.0, 0.0]
+        DVec3::X
     };
-    let e2 = cross(a, e1);
-    (a, e1, e2)
+    (a, e1, a.cross(e1))
 }
 
 /// Runs the walk for one g slice (parallel over batches of [`BATCH`] photons; `progress` is called
@@ -463,25 +452,25 @@ impl PhotonTally {
 fn walk(cfg: &LobeConfig, photon: u64, t: &mut Tally) {
     let bins = cfg.bins();
     let rng = cfg.stream.sample(photon);
-    let (mut p, mut d) = ([0.0f64; 3], [0.0f64, 0.0, 1.0]);
+    let (mut p, mut d) = (DVec3::ZERO, DVec3::Z);
     let phi_bins = cfg.phi_nodes();
     let nbins = cfg.direction_bins as f64;
     for k in 1..=cfg.max_order {
         let dim = 3 * (k as u32 - 1);
         let step = -(-rng.uniform(dim)).ln_1p();
-        p = [p[0] + step * d[0], p[1] + step * d[1], p[2] + step * d[2]];
+        p += step * d;
         if k >= 2 {
-            let rho2 = p[0] * p[0] + p[1] * p[1];
+            let rho2 = p.x * p.x + p.y * p.y;
             let rho = rho2.sqrt();
-            if let (Some(iz), Some(ir)) = (cfg.z.cell(p[2]), cfg.rho.cell(rho)) {
+            if let (Some(iz), Some(ir)) = (cfg.z.cell(p.z), cfg.rho.cell(rho)) {
                 t.inside[k - 1] += 1;
-                let r = (rho2 + p[2] * p[2]).sqrt();
+                let r = (rho2 + p.z * p.z).sqrt();
                 // μ' = â·ω' with â = p/r (the beam direction at the origin itself).
-                let mu = if r > 0.0 { (dot(p, d) / r).clamp(-1.0, 1.0) } else { d[2] };
+                let mu = if r > 0.0 { (p.dot(d) / r).clamp(-1.0, 1.0) } else { d.z };
                 let jm = ((direction_coordinate(mu) * nbins) as usize).min(cfg.direction_bins - 1);
                 let jp = if phi_bins > 1 {
                     let (_, e1, e2) = lobe_frame(p);
-                    let phi = dot(d, e2).abs().atan2(dot(d, e1));
+                    let phi = d.dot(e2).abs().atan2(d.dot(e1));
                     ((phi / PI * phi_bins as f64) as usize).min(phi_bins - 1)
                 } else {
                     0
@@ -491,28 +480,27 @@ fn walk(cfg: &LobeConfig, photon: u64, t: &mut Tally) {
                 t.pending.push(slot << ORDER_BITS | k as u64);
             }
         } else {
-            t.inside[0] += u64::from(cfg.z.cell(p[2]).is_some());
+            t.inside[0] += u64::from(cfg.z.cell(p.z).is_some());
         }
         // Scatter about d: cosine μ from HG, azimuth uniform, in the frame built from d alone.
         let mu = hg::sample_mu(rng.uniform(dim + 1), cfg.g);
         let (sp, cp) = (2.0 * PI * rng.uniform(dim + 2)).sin_cos();
         let s = (1.0 - mu * mu).max(0.0).sqrt();
-        d = if d[2].abs() < 0.999_99 {
-            let q = (1.0 - d[2] * d[2]).sqrt();
-            [
-                mu * d[0] + s * (d[0] * d[2] * cp - d[1] * sp) / q,
-                mu * d[1] + s * (d[1] * d[2] * cp + d[0] * sp) / q,
-                mu * d[2] - s * cp * q,
-            ]
+        d = if d.z.abs() < 0.999_99 {
+            let q = (1.0 - d.z * d.z).sqrt();
+            DVec3::new(
+                mu * d.x + s * (d.x * d.z * cp - d.y * sp) / q,
+                mu * d.y + s * (d.y * d.z * cp + d.x * sp) / q,
+                mu * d.z - s * cp * q,
+            )
         } else {
-            let sign = d[2].signum();
-            [s * cp, s * sp, sign * mu]
+            let sign = d.z.signum();
+            DVec3::new(s * cp, s * sp, sign * mu)
         };
-        let n = norm(d);
-        d = [d[0] / n, d[1] / n, d[2] / n];
+        d /= d.length();
     }
     t.events += cfg.max_order as u64;
-    if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
+    if !p.is_finite() {
         t.dropped += 1;
     }
 }

@@ -101,6 +101,7 @@
 use std::f64::consts::{PI, TAU};
 use std::sync::OnceLock;
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::physics::hg::{phase, sample_mu};
@@ -177,7 +178,8 @@ pub fn e2(p: [f64; 3], omega: [f64; 3], g: f64) -> Result<f64, String> {
         return Err(format!("e2: position {p:?} and direction {omega:?} must be finite"));
     }
     check_g(g)?;
-    let len = norm(omega);
+    let w = DVec3::from_array(omega);
+    let len = w.length();
     if (len - 1.0).abs() > UNIT_TOL {
         return Err(format!("e2: direction {omega:?} is not a unit vector (length {len})"));
     }
@@ -185,8 +187,8 @@ pub fn e2(p: [f64; 3], omega: [f64; 3], g: f64) -> Result<f64, String> {
     if rho < AXIS_MIN {
         return Err(format!("e2: distance {rho} from the beam axis is below {AXIS_MIN:e} (E_2 diverges on the axis)"));
     }
-    let w = omega.map(|c| c / len);
-    e2_core(rho, p[2], (p[0] * w[0] + p[1] * w[1]) / rho, w[2], g)
+    let w = w / len;
+    e2_core(rho, p[2], (p[0] * w.x + p[1] * w.y) / rho, w.z, g)
 }
 
 /// Azimuthal average of `E_2` over the lobe of angle `theta` about `â = P/|P|` at
@@ -204,7 +206,7 @@ pub fn double_symmetric(rho: f64, z: f64, theta: f64, g: f64) -> Result<f64, Str
     let lobe = Lobe::new(rho, z, theta);
     let f = |phi: f64| {
         let w = lobe.direction(phi);
-        e2_core(rho, z, w[0], w[2], g)
+        e2_core(rho, z, w.x, w.z, g)
     };
     Ok(adaptive_phi(&f, g)? / PI)
 }
@@ -279,11 +281,6 @@ fn check_probe(rho: f64, z: f64, theta: f64, g: f64) -> Result<(), String> {
 /// Validates an HG mean cosine.
 fn check_g(g: f64) -> Result<(), String> {
     if g.abs() < 1.0 { Ok(()) } else { Err(format!("g = {g} is out of range: valid range is (-1, 1)")) }
-}
-
-/// Euclidean length.
-fn norm(v: [f64; 3]) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
 /// The peak of an HG lobe on the `ψ` axis.
@@ -476,13 +473,13 @@ impl Lobe {
 
     /// `ω = cos θ â + sin θ (cos φ ê₁ + sin φ ŷ)`, `ê₁ = ŷ × â = (az, 0, −ax)` (in the plane of `ẑ`
     /// and `â`, so `φ → −φ` only flips `ω_y`).
-    fn direction(&self, phi: f64) -> [f64; 3] {
+    fn direction(&self, phi: f64) -> DVec3 {
         let (s, c) = phi.sin_cos();
-        [
+        DVec3::new(
             self.cos_t * self.ax + self.sin_t * c * self.az,
             self.sin_t * s,
             self.cos_t * self.az - self.sin_t * c * self.ax,
-        ]
+        )
     }
 }
 
@@ -509,9 +506,9 @@ impl Walk {
     fn sample(&self, i: u64) -> Result<f64, String> {
         let a = self.albedo;
         let mut d = self.lobe.direction(TAU * self.key.uniform(i, 0));
-        let mut y = [self.rho, 0.0, self.z];
+        let mut y = DVec3::new(self.rho, 0.0, self.z);
         let mut weight = a * a;
-        let mut score = weight * e2_core(self.rho, self.z, d[0], d[2], self.g)?;
+        let mut score = weight * e2_core(self.rho, self.z, d.x, d.z, self.g)?;
         let mut relative = 1.0;
         for j in 1..=self.steps {
             relative *= a;
@@ -525,10 +522,10 @@ impl Walk {
             let azimuth = TAU * self.key.uniform(i, dim + 1);
             let t = -(1.0 - self.key.uniform(i, dim + 2)).ln();
             d = turn(d, mu, azimuth);
-            y = [y[0] - t * d[0], y[1] - t * d[1], y[2] - t * d[2]];
-            let rho = y[0].hypot(y[1]);
+            y -= t * d;
+            let rho = y.x.hypot(y.y);
             if rho >= AXIS_MIN {
-                score += weight * e2_core(rho, y[2], (y[0] * d[0] + y[1] * d[1]) / rho, d[2], self.g)?;
+                score += weight * e2_core(rho, y.z, (y.x * d.x + y.y * d.y) / rho, d.z, self.g)?;
             }
         }
         Ok(score)
@@ -537,17 +534,16 @@ impl Walk {
 
 /// The unit direction at cosine `mu` from the unit vector `d`, azimuth `azimuth` about it (in a
 /// continuous orthonormal frame built from `d`; renormalised so rounding does not accumulate).
-fn turn(d: [f64; 3], mu: f64, azimuth: f64) -> [f64; 3] {
-    let sign = 1.0f64.copysign(d[2]);
-    let a = -1.0 / (sign + d[2]);
-    let b = d[0] * d[1] * a;
-    let t1 = [1.0 + sign * d[0] * d[0] * a, sign * b, -sign * d[0]];
-    let t2 = [b, sign + d[1] * d[1] * a, -d[1]];
+fn turn(d: DVec3, mu: f64, azimuth: f64) -> DVec3 {
+    let sign = 1.0f64.copysign(d.z);
+    let a = -1.0 / (sign + d.z);
+    let b = d.x * d.y * a;
+    let t1 = DVec3::new(1.0 + sign * d.x * d.x * a, sign * b, -sign * d.x);
+    let t2 = DVec3::new(b, sign + d.y * d.y * a, -d.y);
     let s = ((1.0 - mu) * (1.0 + mu)).max(0.0).sqrt();
     let (sa, ca) = azimuth.sin_cos();
-    let v = [0, 1, 2].map(|k| mu * d[k] + s * (ca * t1[k] + sa * t2[k]));
-    let len = norm(v);
-    v.map(|c| c / len)
+    let v = mu * d + s * (ca * t1 + sa * t2);
+    v / v.length()
 }
 
 /// Stream cell of a probe: the bit patterns of `rho, z, theta, g` folded through a 64-bit

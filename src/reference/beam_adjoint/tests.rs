@@ -194,9 +194,10 @@ fn double_symmetric_matches_periodic_trapezoid() {
     for (rho, z, theta, g) in [(1.0, 1.5, 0.8, 0.9), (0.3, -0.4, 2.5, -0.9), (2.0, 0.2, 1.6, 0.95)] {
         let lobe = Lobe::new(rho, z, theta);
         let n = 2048;
-        let trap =
-            (0..n).map(|j| e2([rho, 0.0, z], lobe.direction(TAU * j as f64 / n as f64), g).unwrap()).sum::<f64>()
-                / n as f64;
+        let trap = (0..n)
+            .map(|j| e2([rho, 0.0, z], lobe.direction(TAU * j as f64 / n as f64).to_array(), g).unwrap())
+            .sum::<f64>()
+            / n as f64;
         let got = double_symmetric(rho, z, theta, g).unwrap();
         println!(
             "ρ = {rho}, z = {z}, θ = {theta}, g = {g}: {got:.12e} vs trapezoid {trap:.12e}, rel {:.1e}",
@@ -318,14 +319,14 @@ fn walk_is_bit_identical_for_any_thread_count() {
 #[test]
 fn turn_keeps_unit_length_and_the_scattering_cosine() {
     for d in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], unit([1e-9, 0.0, -1.0]), unit([0.3, -0.5, 0.8]), [1.0, 0.0, 0.0]] {
+        let d = DVec3::from_array(d);
         for (mu, az) in [(0.3, 0.0), (-0.99, 2.0), (1.0, 1.0), (-1.0, 4.0), (0.0, 5.5)] {
             let v = turn(d, mu, az);
             let w = turn(d, mu, az + 0.5 * PI);
-            let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-            assert!((norm(v) - 1.0).abs() < 1e-15);
-            assert!((dot(v, d) - mu).abs() < 1e-14, "d = {d:?}, mu = {mu}");
-            let perp = |x: [f64; 3]| [0, 1, 2].map(|k| x[k] - mu * d[k]);
-            assert!(dot(perp(v), perp(w)).abs() < 1e-14);
+            assert!((v.length() - 1.0).abs() < 1e-15);
+            assert!((v.dot(d) - mu).abs() < 1e-14, "d = {d:?}, mu = {mu}");
+            let perp = |x: DVec3| x - mu * d;
+            assert!(perp(v).dot(perp(w)).abs() < 1e-14);
         }
     }
 }

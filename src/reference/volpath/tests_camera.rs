@@ -23,14 +23,6 @@ fn run(scene: &Scene, rays: &[CameraRay], o: &VolPathOptions) -> Vec<Estimate> {
     e
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
-}
-
 /// `|mean − exact| < k · stderr` and `< rel · exact` on every channel.
 fn within(e: &Estimate, exact: [f64; 3], k: f64, rel: f64, what: &str) {
     eprintln!("{what}: {:?} ± {:?} vs {exact:?}", e.mean, e.stderr);
@@ -65,9 +57,9 @@ fn lambert_floor_under_point_light_is_exact_direct_lighting() {
     for surface_bounces in [u32::MAX, 0] {
         let e = run(&s, &rays, &VolPathOptions { surface_bounces, ..opts(16, 0, false) });
         for (&(_, target), est) in views.iter().zip(&e) {
-            let d = sub(light, target);
-            let r = norm(d);
-            let exact = k.map(|kc| kc / PI * 3.5 * (d[1] / r) / (r * r));
+            let d = DVec3::from_array(light) - DVec3::from_array(target);
+            let r = d.length();
+            let exact = k.map(|kc| kc / PI * 3.5 * (d.y / r) / (r * r));
             // 1e-6: the hit point comes from the BVH at f32 precision.
             assert!(close(est.mean, exact, 1e-6), "{:?} vs {exact:?}", est.mean);
             assert_eq!(est.stderr, [0.0; 3]);
@@ -141,7 +133,7 @@ fn emitters_seen_through_an_absorbing_slab() {
     rays.push(ray([6.0, 2.0, 0.0], [6.0, 2.0, 5.0])); // from inside the sphere
     let e = run(&s, &rays, &opts(20_000, 8, true));
     for (i, t) in targets.iter().enumerate() {
-        let len = norm(*t) / t[0]; // 1 m of slab along x
+        let len = DVec3::from_array(*t).length() / t[0]; // 1 m of slab along x
         let exact = [0, 1, 2].map(|c| le[c] * (-sigma_a[c] * len).exp());
         if i == 0 {
             // The emissive mesh is met by the free flight (escape probability T_h): a noisy estimate.
@@ -165,10 +157,11 @@ fn hg_phase(mu: f64, g: f64) -> f64 {
 /// composite Simpson with 400 000 intervals.
 fn single_scatter(o: [f64; 3], d: [f64; 3], light: [f64; 3], i: f64, medium: (f64, f64, f64), t_max: f64) -> f64 {
     let (ss, st, g) = medium;
+    let (o, d, light) = (DVec3::from_array(o), DVec3::from_array(d), DVec3::from_array(light));
     let f = |t: f64| {
-        let v = [0, 1, 2].map(|c| light[c] - (o[c] + t * d[c]));
-        let r = norm(v);
-        let mu = (v[0] * d[0] + v[1] * d[1] + v[2] * d[2]) / r;
+        let v = light - (o + t * d);
+        let r = v.length();
+        let mu = v.dot(d) / r;
         (-st * t).exp() * ss * hg_phase(mu, g) * i * (-st * r).exp() / (r * r)
     };
     let n = 400_000;
@@ -312,7 +305,7 @@ fn eye_surfaces_off_leaves_only_the_media() {
     let single = single_scatter([0.0; 3], [0.0, -1.0, 0.0], light, i, (ss, ss + sa, g), 2.0);
     within(&off[0], [single; 3], 4.0, 0.02, "eye surfaces off");
     let on = run(&s, &rays, &opts(100_000, 0, true));
-    let d = norm(sub(light, [0.0, -2.0, 0.0]));
+    let d = (DVec3::from_array(light) - DVec3::new(0.0, -2.0, 0.0)).length();
     let floor_term = k / PI * i * (2.6 / d) * (-(ss + sa) * (d + 2.0)).exp() / (d * d);
     within(&on[0], [single + floor_term; 3], 4.0, 0.02, "eye surfaces on");
 }

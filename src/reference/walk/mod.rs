@@ -82,7 +82,7 @@
 //! (exact at `g = 0`, error `O(g²) < 1e-12`) when `|g| < 1e-6`, where the closed form cancels.
 //!
 //! **Independent of** every table generator and of `crate::physics::hg` (own HG phase and sampler,
-//! own geometry); it shares only `crate::physics::rng`. Streams are keyed by `(seed, photon index)`
+//! own geometry, on glam's `DVec3`); it shares only `crate::physics::rng`. Streams are keyed by `(seed, photon index)`
 //! with a running draw counter, batches are traced sequentially and reduced in batch order, so the
 //! result is bit-identical for any rayon thread count.
 
@@ -90,6 +90,7 @@ mod photon;
 #[cfg(test)]
 mod tests;
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::physics::rng::StreamKey;
@@ -204,7 +205,7 @@ pub fn irradiance(
     if medium.g.is_nan() || medium.g.abs() >= 1.0 {
         return Err(format!("medium.g = {} is out of range: valid range is the open interval (-1, 1)", medium.g));
     }
-    let n = unit("normal", normal, 1e-150, 1e150)?;
+    let n = unit("normal", DVec3::from_array(normal), 1e-150, 1e150)?;
     if !(64..=1u64 << 48).contains(&cfg.photons) {
         return Err(format!("cfg.photons = {} is out of range: valid range is [64, 2^48]", cfg.photons));
     }
@@ -216,9 +217,10 @@ pub fn irradiance(
     let (geometry, direct, scale) = match *emitter {
         Emitter::Point { intensity, position } => {
             let intensity = in_range("emitter.intensity", intensity, 0.0, 1e100)?;
+            let position = DVec3::from_array(position);
             let dist = norm3("emitter.position", position, 1e-100, 1e100)?;
-            let l = position.map(|c| c / dist);
-            let direct = intensity * (-sigma_t * dist).exp() * dot(n, l).max(0.0) / (dist * dist);
+            let l = position / dist;
+            let direct = intensity * (-sigma_t * dist).exp() * n.dot(l).max(0.0) / (dist * dist);
             (
                 Geometry::Point { d: sigma_t * dist, l },
                 direct,
@@ -227,18 +229,19 @@ pub fn irradiance(
         }
         Emitter::Area { intensity, position, normal } => {
             let intensity = in_range("emitter.intensity", intensity, 0.0, 1e100)?;
+            let position = DVec3::from_array(position);
             let dist = norm3("emitter.position", position, 1e-100, 1e100)?;
-            let ne = unit("emitter.normal", normal, 1e-150, 1e150)?;
-            let l = position.map(|c| c / dist);
-            let facing = (-dot(ne, l)).max(0.0);
-            let direct = intensity * facing * (-sigma_t * dist).exp() * dot(n, l).max(0.0) / (dist * dist);
+            let ne = unit("emitter.normal", DVec3::from_array(normal), 1e-150, 1e150)?;
+            let l = position / dist;
+            let facing = (-ne.dot(l)).max(0.0);
+            let direct = intensity * facing * (-sigma_t * dist).exp() * n.dot(l).max(0.0) / (dist * dist);
             (Geometry::Area { d: sigma_t * dist, l, ne }, direct, std::f64::consts::PI * intensity * sigma_t * sigma_t)
         }
         Emitter::Directional { irradiance, toward_light, depth } => {
             let e0 = in_range("emitter.irradiance", irradiance, 0.0, 1e100)?;
-            let l = unit("emitter.toward_light", toward_light, 1e-150, 1e150)?;
+            let l = unit("emitter.toward_light", DVec3::from_array(toward_light), 1e-150, 1e150)?;
             let depth = in_range("emitter.depth", depth, 0.0, 1e100)?;
-            let direct = e0 * (-sigma_t * depth).exp() * dot(n, l).max(0.0);
+            let direct = e0 * (-sigma_t * depth).exp() * n.dot(l).max(0.0);
             (Geometry::Slab { depth: sigma_t * depth, l }, direct, e0)
         }
     };
@@ -330,22 +333,18 @@ fn in_range(name: &str, v: f64, lo: f64, hi: f64) -> Result<f64, String> {
 }
 
 /// Euclidean norm of a finite vector if it lies in `[lo, hi]`, else an error naming `name`.
-fn norm3(name: &str, v: [f64; 3], lo: f64, hi: f64) -> Result<f64, String> {
-    let len = dot(v, v).sqrt();
-    if v.iter().all(|c| c.is_finite()) && (lo..=hi).contains(&len) {
+fn norm3(name: &str, v: DVec3, lo: f64, hi: f64) -> Result<f64, String> {
+    let len = v.length();
+    if v.is_finite() && (lo..=hi).contains(&len) {
         Ok(len)
     } else {
+        let v = v.to_array();
         Err(format!("{name} = {v:?} is out of range: valid range is finite components with length in [{lo:e}, {hi:e}]"))
     }
 }
 
-/// `v` normalised, if finite with length in `[lo, hi]`, else an error naming `name`.
-fn unit(name: &str, v: [f64; 3], lo: f64, hi: f64) -> Result<[f64; 3], String> {
+/// `v` normalised (divided by its length), if finite with length in `[lo, hi]`, else an error naming `name`.
+fn unit(name: &str, v: DVec3, lo: f64, hi: f64) -> Result<DVec3, String> {
     let len = norm3(name, v, lo, hi)?;
-    Ok(v.map(|c| c / len))
-}
-
-/// Dot product.
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    Ok(v / len)
 }

@@ -7,14 +7,14 @@
 //! is unbiased with finite variance; this file is the arithmetic.
 //!
 //! **Independent of** `crate::physics::hg` and the table generators: the HG phase and sampler, the
-//! frames and all geometry are written here.
+//! frames and all geometry are written here (vector arithmetic is glam's `DVec3`, in the same
+//! operation order as the scalar formulas, so results are bit-identical to them).
 
 use std::f64::consts::{PI, TAU};
 
-use crate::physics::rng::StreamKey;
+use glam::DVec3;
 
-/// Three-vector.
-type V3 = [f64; 3];
+use crate::physics::rng::StreamKey;
 
 /// Russian roulette below this weight (survival probability `w / ROULETTE`).
 const ROULETTE: f64 = 0.1;
@@ -29,11 +29,11 @@ const MAX_COLLISIONS: usize = 1 << 32;
 #[derive(Debug, Clone, Copy)]
 pub(super) enum Geometry {
     /// Point source at `d·l`.
-    Point { d: f64, l: V3 },
+    Point { d: f64, l: DVec3 },
     /// Cosine-weighted differential area at `d·l` with unit normal `ne`.
-    Area { d: f64, l: V3, ne: V3 },
+    Area { d: f64, l: DVec3, ne: DVec3 },
     /// Half-space `{p·l ≤ depth}` lit along `−l`.
-    Slab { depth: f64, l: V3 },
+    Slab { depth: f64, l: DVec3 },
 }
 
 /// Everything a photon needs, validated.
@@ -42,13 +42,13 @@ pub(super) struct Problem {
     geometry: Geometry,
     albedo: f64,
     g: f64,
-    normal: V3,
+    normal: DVec3,
     k_max: usize,
     far: f64,
     /// Direction toward the light.
-    l: V3,
+    l: DVec3,
     /// Orthonormal pair perpendicular to `l`.
-    frame: (V3, V3),
+    frame: (DVec3, DVec3),
     /// Emitter–receiver distance: `d` (point) or `D` (half-space).
     span: f64,
     /// Rate `β` of the stretched first-flight component.
@@ -57,7 +57,7 @@ pub(super) struct Problem {
 
 impl Problem {
     /// Bundles validated parameters (lengths in mean free paths).
-    pub(super) fn new(geometry: Geometry, albedo: f64, g: f64, normal: V3, k_max: usize, far: f64) -> Self {
+    pub(super) fn new(geometry: Geometry, albedo: f64, g: f64, normal: DVec3, k_max: usize, far: f64) -> Self {
         let (l, span) = match geometry {
             Geometry::Point { l, d } | Geometry::Area { l, d, .. } => (l, d),
             Geometry::Slab { l, depth } => (l, depth),
@@ -72,7 +72,7 @@ impl Problem {
 /// full precision near the emitter whatever the emitter–receiver distance.
 #[derive(Debug, Clone, Copy)]
 enum Place {
-    FromSource(V3),
+    FromSource(DVec3),
     Depth(f64),
 }
 
@@ -120,9 +120,9 @@ pub(super) fn trace(p: &Problem, key: StreamKey, tally: &mut Tally) {
     let (mut place, mut dir) = match p.geometry {
         Geometry::Point { .. } | Geometry::Area { .. } => {
             let mu = 1.0 - 2.0 * rng.next();
-            (Place::FromSource([0.0; 3]), direction(mu, TAU * rng.next(), basis(p.l), p.l))
+            (Place::FromSource(DVec3::ZERO), direction(mu, TAU * rng.next(), basis(p.l), p.l))
         }
-        Geometry::Slab { .. } => (Place::Depth(0.0), scale(p.l, -1.0)),
+        Geometry::Slab { .. } => (Place::Depth(0.0), p.l * -1.0),
     };
     // First flight: defensive mixture of Exp(1) and the stretched Exp(β), weighted by the density
     // ratio e^{−t}/(½e^{−t} + ½βe^{−βt}) ≤ 2.
@@ -134,16 +134,16 @@ pub(super) fn trace(p: &Problem, key: StreamKey, tally: &mut Tally) {
     let emitted = dir;
     for order in 1..=MAX_COLLISIONS {
         place = match place {
-            Place::FromSource(r) => Place::FromSource(add(r, scale(dir, flight))),
-            Place::Depth(z) => Place::Depth(z - flight * dot(dir, p.l)),
+            Place::FromSource(r) => Place::FromSource(r + dir * flight),
+            Place::Depth(z) => Place::Depth(z - flight * dir.dot(p.l)),
         };
         let kernel = match place {
             Place::FromSource(r) => {
-                if !r.iter().all(|c| c.is_finite()) {
+                if !r.is_finite() {
                     tally.nonfinite += 1;
                     return;
                 }
-                let a = norm(r);
+                let a = r.length();
                 if a > p.far && (a - p.span).abs() > p.far {
                     tally.truncated += weight;
                     return;
@@ -195,13 +195,13 @@ struct Rotated {
     /// Importance weight `ln((a+d)/|a−d|)/(2ad)` of the sampled rotation.
     weight: f64,
     /// Unit direction from the receiver toward the rotated vertex.
-    omega: V3,
+    omega: DVec3,
     /// `n·ω` (> 0).
     cos_n: f64,
     /// Image of the radial direction `(y − s)/a`.
-    radial: V3,
+    radial: DVec3,
     /// Orthonormal pair perpendicular to `radial` (the spin frame).
-    spin: (V3, V3),
+    spin: (DVec3, DVec3),
 }
 
 /// Samples the rotated vertex for a vertex at distance `a > 0` from the source with uniforms `x1, x2`;
@@ -224,75 +224,74 @@ fn rotate_vertex(p: &Problem, a: f64, x1: f64, x2: f64) -> Option<Rotated> {
     let sin_t = (one_minus_cos * one_plus_cos).sqrt().min(1.0);
     let (s1, c1) = (TAU * x2).sin_cos();
     let (e1, e2) = p.frame;
-    let e_phi = add(scale(e1, c1), scale(e2, s1));
-    let e_perp = sub(scale(e2, c1), scale(e1, s1));
+    let e_phi = e1 * c1 + e2 * s1;
+    let e_perp = e2 * c1 - e1 * s1;
     // y' − x = s + a(cos θ (−l) + sin θ e_φ) = ((d − a) + a(1 − cos θ)) l + a sin θ e_φ.
-    let y = add(scale(l, (d - a) + a * one_minus_cos), scale(e_phi, a * sin_t));
-    let ry = norm(y);
+    let y = l * ((d - a) + a * one_minus_cos) + e_phi * (a * sin_t);
+    let ry = y.length();
     if ry.is_nan() || ry <= 0.0 {
         return None;
     }
-    let omega = scale(y, 1.0 / ry);
-    let cos_n = dot(p.normal, omega);
+    let omega = y * (1.0 / ry);
+    let cos_n = p.normal.dot(omega);
     if cos_n.is_nan() || cos_n <= 0.0 {
         return None;
     }
-    let radial = add(scale(l, -cos_t), scale(e_phi, sin_t));
-    let polar = add(scale(l, sin_t), scale(e_phi, cos_t));
+    let radial = l * -cos_t + e_phi * sin_t;
+    let polar = l * sin_t + e_phi * cos_t;
     Some(Rotated { r, weight, omega, cos_n, radial, spin: (polar, e_perp) })
 }
 
 /// Rotation-averaged point-detector kernel of a vertex at `rel` from the source reached along `dir`,
 /// for a source at `d·l` and the receiver at the origin: one importance sample of the Haar average
 /// of `p(u'·(−ω)) max(0, n·ω) e^{−r}/r²` over rotations about the source (module doc).
-fn point_kernel(p: &Problem, rel: V3, dir: V3, rng: &mut Draws) -> f64 {
+fn point_kernel(p: &Problem, rel: DVec3, dir: DVec3, rng: &mut Draws) -> f64 {
     let (x1, x2, x3) = (rng.next(), rng.next(), rng.next());
-    let a = norm(rel);
+    let a = rel.length();
     if a.is_nan() || a <= 0.0 {
         return 0.0;
     }
-    let u_radial = (dot(dir, rel) / a).clamp(-1.0, 1.0);
+    let u_radial = (dir.dot(rel) / a).clamp(-1.0, 1.0);
     let Some(v) = rotate_vertex(p, a, x1, x2) else {
         return 0.0;
     };
     // Rotated incoming direction: same radial component, uniform spin about the new radial axis.
     let u = direction(u_radial, TAU * x3, v.spin, v.radial);
-    hg_phase(p.g, -dot(u, v.omega)) * v.cos_n * (-v.r).exp() * v.weight
+    hg_phase(p.g, -u.dot(v.omega)) * v.cos_n * (-v.r).exp() * v.weight
 }
 
 /// Rotation-averaged kernel of the area emitter (module doc): the photon was emitted isotropically
 /// along `emitted`; the rotation `R` maps `(y − s)/a` to the sampled radial direction and a fixed
 /// perpendicular `p̂` to a uniformly spun one, and the score of the rotated path is the point kernel
 /// times the emission reweighting `4 max(0, n_e·R u₀)` (mean 1 over isotropic `u₀`, at most 4).
-fn area_kernel(p: &Problem, rel: V3, dir: V3, emitted: V3, ne: V3, rng: &mut Draws) -> f64 {
+fn area_kernel(p: &Problem, rel: DVec3, dir: DVec3, emitted: DVec3, ne: DVec3, rng: &mut Draws) -> f64 {
     let (x1, x2, x3) = (rng.next(), rng.next(), rng.next());
-    let a = norm(rel);
+    let a = rel.length();
     if a.is_nan() || a <= 0.0 {
         return 0.0;
     }
     let Some(v) = rotate_vertex(p, a, x1, x2) else {
         return 0.0;
     };
-    let r_hat = scale(rel, 1.0 / a);
+    let r_hat = rel * (1.0 / a);
     let (p_hat, q_hat) = basis(r_hat);
     let (s3, c3) = (TAU * x3).sin_cos();
     let (f1, f2) = v.spin;
-    let p_img = add(scale(f1, c3), scale(f2, s3));
-    let q_img = cross(v.radial, p_img);
+    let p_img = f1 * c3 + f2 * s3;
+    let q_img = v.radial.cross(p_img);
     // (r̂, p̂, q̂ = r̂ × p̂) and (radial, p̂', q̂' = radial × p̂') are both right-handed: R ∈ SO(3).
-    let rotate =
-        |w: V3| add(scale(v.radial, dot(w, r_hat)), add(scale(p_img, dot(w, p_hat)), scale(q_img, dot(w, q_hat))));
-    let emission = 4.0 * dot(ne, rotate(emitted)).max(0.0);
+    let rotate = |w: DVec3| v.radial * w.dot(r_hat) + (p_img * w.dot(p_hat) + q_img * w.dot(q_hat));
+    let emission = 4.0 * ne.dot(rotate(emitted)).max(0.0);
     if emission == 0.0 {
         return 0.0;
     }
     let u = rotate(dir);
-    hg_phase(p.g, -dot(u, v.omega)) * v.cos_n * (-v.r).exp() * v.weight * emission
+    hg_phase(p.g, -u.dot(v.omega)) * v.cos_n * (-v.r).exp() * v.weight * emission
 }
 
 /// Plane-integrated detector kernel of a vertex at height `h` above the receiver plane reached along
 /// `dir`: one sample of `∫ dφ ∫_{|h|}^∞ p(u·(−ω)) max(0, n·ω) e^{−t}/t dt` (module doc).
-fn plane_kernel(p: &Problem, h: f64, dir: V3, rng: &mut Draws) -> f64 {
+fn plane_kernel(p: &Problem, h: f64, dir: DVec3, rng: &mut Draws) -> f64 {
     let (x1, x2, x3) = (rng.next(), rng.next(), rng.next());
     let l = p.l;
     let tau = h.abs().max(MIN_TAU);
@@ -312,11 +311,11 @@ fn plane_kernel(p: &Problem, h: f64, dir: V3, rng: &mut Draws) -> f64 {
     };
     let mu = (tau / t).min(1.0);
     let omega = direction(if h >= 0.0 { mu } else { -mu }, TAU * x3, p.frame, l);
-    let cos_n = dot(p.normal, omega);
+    let cos_n = p.normal.dot(omega);
     if cos_n.is_nan() || cos_n <= 0.0 {
         return 0.0;
     }
-    TAU * hg_phase(p.g, -dot(dir, omega)) * cos_n * est
+    TAU * hg_phase(p.g, -dir.dot(omega)) * cos_n * est
 }
 
 /// Henyey–Greenstein phase `(1 − g²) / (4π (1 + g² − 2gμ)^{3/2})`, the base written as a sum of
@@ -344,42 +343,17 @@ pub(super) fn hg_sample(g: f64, xi: f64) -> f64 {
 }
 
 /// Unit vector with cosine `mu` to `axis` and azimuth `phi` in the frame `(e1, e2)` ⊥ `axis`.
-fn direction(mu: f64, phi: f64, (e1, e2): (V3, V3), axis: V3) -> V3 {
+fn direction(mu: f64, phi: f64, (e1, e2): (DVec3, DVec3), axis: DVec3) -> DVec3 {
     let st = ((1.0 - mu) * (1.0 + mu)).max(0.0).sqrt();
     let (s, c) = phi.sin_cos();
-    let v = add(scale(axis, mu), add(scale(e1, st * c), scale(e2, st * s)));
-    scale(v, 1.0 / norm(v))
+    let v = axis * mu + (e1 * (st * c) + e2 * (st * s));
+    v * (1.0 / v.length())
 }
 
 /// Orthonormal pair perpendicular to the unit vector `u`.
-fn basis(u: V3) -> (V3, V3) {
-    let seed = if u[0].abs() < 0.6 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
-    let e1 = sub(seed, scale(u, dot(seed, u)));
-    let e1 = scale(e1, 1.0 / norm(e1));
-    let e2 = [u[1] * e1[2] - u[2] * e1[1], u[2] * e1[0] - u[0] * e1[2], u[0] * e1[1] - u[1] * e1[0]];
-    (e1, e2)
-}
-
-fn cross(a: V3, b: V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
-}
-
-fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn scale(a: V3, k: f64) -> V3 {
-    [a[0] * k, a[1] * k, a[2] * k]
+fn basis(u: DVec3) -> (DVec3, DVec3) {
+    let seed = if u.x.abs() < 0.6 { DVec3::X } else { DVec3::Y };
+    let e1 = seed - u * seed.dot(u);
+    let e1 = e1 * (1.0 / e1.length());
+    (e1, u.cross(e1))
 }

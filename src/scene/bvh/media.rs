@@ -24,6 +24,8 @@
 //! the higher index counts as the inner one. A mesh that is not closed can leave a count unbalanced;
 //! space where a mesh's count is not positive is outside it.
 
+use glam::DVec3;
+
 use super::{Query, Ray, SceneBvh, intersect};
 use crate::scene::{Boundary, Density, Scene};
 
@@ -143,18 +145,14 @@ fn positive(x: f64) -> bool {
     x > 0.0
 }
 
-/// Length of `v`, scaled so that large or tiny components neither overflow nor underflow.
-fn length(v: [f64; 3]) -> f64 {
-    let m = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+/// Length of `v`, scaled so that large or tiny components neither overflow nor underflow (unlike glam's
+/// `length`, which squares the components as they are).
+fn scaled_length(v: DVec3) -> f64 {
+    let m = 0.0f64.max(v.x.abs()).max(v.y.abs()).max(v.z.abs());
     if !(m > 0.0 && m.is_finite()) {
         return if m.is_nan() { 0.0 } else { m };
     }
-    let s = v.map(|x| x / m);
-    m * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt()
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    m * (v / m).length()
 }
 
 /// iser2018 Eq. 4: `∫₀ᴰ ρ' e^{−b(h₀ + s μ)} ds = ρ' e^{−b h₀} (1 − e^{−b D μ}) / (b μ)` for the density
@@ -196,7 +194,8 @@ fn from_log(log: impl FnOnce() -> f64, direct: f64) -> f64 {
 
 /// `∫ ρ ds` over `[t0, t1]` of `ray` for one density field.
 fn density_integral(density: &Density, ray: &Ray, t0: f64, t1: f64) -> f64 {
-    let len = length(ray.direction);
+    let dir = DVec3::from_array(ray.direction);
+    let len = scaled_length(dir);
     let d = if t1 == f64::INFINITY { f64::INFINITY } else { (t1 - t0) * len };
     if !positive(d) || !len.is_finite() {
         return 0.0;
@@ -204,15 +203,16 @@ fn density_integral(density: &Density, ray: &Ray, t0: f64, t1: f64) -> f64 {
     match density {
         Density::Homogeneous => d,
         Density::ExponentialHeight { rho, falloff, direction, offset } => {
-            let nlen = length(*direction);
+            let direction = DVec3::from_array(*direction);
+            let nlen = scaled_length(direction);
             if !(nlen > 0.0 && nlen.is_finite()) {
                 return 0.0;
             }
-            let n = direction.map(|x| x / nlen);
-            let omega = ray.direction.map(|x| x / len);
-            let c = [0, 1, 2].map(|k| ray.origin[k] + t0 * ray.direction[k]);
-            let h0 = dot([0, 1, 2].map(|k| c[k] - offset[k]), n);
-            exponential_density_integral(*rho, *falloff, h0, dot(omega, n), d)
+            let n = direction / nlen;
+            let omega = dir / len;
+            let c = DVec3::from_array(ray.origin) + t0 * dir;
+            let h0 = (c - DVec3::from_array(*offset)).dot(n);
+            exponential_density_integral(*rho, *falloff, h0, omega.dot(n), d)
         }
     }
 }
@@ -242,7 +242,8 @@ pub fn optical_thickness(scene: &Scene, segments: &[MediumSegment], ray: &Ray) -
 /// a homogeneous table is looked up with along a heterogeneous path); 0 for a path of zero length.
 /// For an unbounded path it is the limit, `σ_t` times the density far along the last segment.
 pub fn effective_sigma(scene: &Scene, segments: &[MediumSegment], ray: &Ray) -> [f64; 3] {
-    let len = length(ray.direction);
+    let dir = DVec3::from_array(ray.direction);
+    let len = scaled_length(dir);
     let total: f64 = segments.iter().map(|s| if s.t1 > s.t0 { (s.t1 - s.t0) * len } else { 0.0 }).sum();
     if !positive(total) || !len.is_finite() {
         return [0.0; 3];
@@ -257,19 +258,20 @@ pub fn effective_sigma(scene: &Scene, segments: &[MediumSegment], ray: &Ray) -> 
     let far = match &m.density {
         Density::Homogeneous => 1.0,
         Density::ExponentialHeight { rho, falloff, direction, offset } => {
-            let nlen = length(*direction);
+            let direction = DVec3::from_array(*direction);
+            let nlen = scaled_length(direction);
             if !(positive(nlen) && nlen.is_finite() && positive(*rho)) {
                 return [0.0; 3];
             }
-            let n = direction.map(|x| x / nlen);
-            let k = falloff * dot(ray.direction.map(|x| x / len), n);
+            let n = direction / nlen;
+            let k = falloff * (dir / len).dot(n);
             if k > 0.0 {
                 0.0
             } else if k < 0.0 {
                 f64::INFINITY
             } else {
-                let c = [0, 1, 2].map(|i| ray.origin[i] + last.t0 * ray.direction[i] - offset[i]);
-                rho * (-falloff * dot(c, n)).exp()
+                let c = DVec3::from_array(ray.origin) + last.t0 * dir - DVec3::from_array(*offset);
+                rho * (-falloff * c.dot(n)).exp()
             }
         }
     };

@@ -34,6 +34,7 @@ mod tests_media;
 
 use std::time::Instant;
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use super::{Scene, Surface};
@@ -317,10 +318,8 @@ impl SceneBvh {
 
     fn finish_hit(&self, q: &Query, h: &triangle::TriHit, tri: &Tri) -> Hit {
         let (mesh, triangle) = self.locate(tri.gid);
-        let v = tri.v.map(|p| p.map(f64::from));
-        let e1 = [0, 1, 2].map(|c| v[1][c] - v[0][c]);
-        let e2 = [0, 1, 2].map(|c| v[2][c] - v[0][c]);
-        let geometric_normal = normalize(cross(e1, e2)).unwrap_or([0.0, 0.0, 1.0]);
+        let v = tri.v.map(|p| DVec3::from_array(p.map(f64::from)));
+        let geometric_normal = unit_normal((v[1] - v[0]).cross(v[2] - v[0])).unwrap_or(DVec3::Z);
         let (b1, b2) = (f64::from(h.b1), f64::from(h.b2));
         let b0 = 1.0 - b1 - b2;
         let shading_normal = self
@@ -329,9 +328,9 @@ impl SceneBvh {
             .filter(|s| !s.normals.is_empty())
             .and_then(|s| s.triangles.get(triangle).map(|t| (s, t)))
             .and_then(|(s, t)| {
-                let n = t.map(|i| s.normals.get(i as usize).map(|n| n.map(f64::from)));
+                let n = t.map(|i| s.normals.get(i as usize).map(|n| DVec3::from_array(n.map(f64::from))));
                 let (n0, n1, n2) = (n[0]?, n[1]?, n[2]?);
-                normalize([0, 1, 2].map(|c| b0 * n0[c] + b1 * n1[c] + b2 * n2[c]))
+                unit_normal(b0 * n0 + b1 * n1 + b2 * n2)
             })
             .unwrap_or(geometric_normal);
         Hit {
@@ -339,8 +338,8 @@ impl SceneBvh {
             mesh,
             triangle,
             barycentric: [b1, b2],
-            geometric_normal,
-            shading_normal,
+            geometric_normal: geometric_normal.to_array(),
+            shading_normal: shading_normal.to_array(),
             front_face: h.front,
         }
     }
@@ -385,22 +384,19 @@ fn triangle_vertices(positions: &[[f32; 3]], t: &[u32; 3]) -> Option<[[f32; 3]; 
     if v.iter().any(|p| p.iter().any(|x| !x.is_finite())) {
         return None;
     }
-    let p = v.map(|p| p.map(f64::from));
-    let n = cross([0, 1, 2].map(|c| p[1][c] - p[0][c]), [0, 1, 2].map(|c| p[2][c] - p[0][c]));
-    (n.iter().any(|&x| x != 0.0) && n.iter().all(|x| x.is_finite())).then_some([*v[0], *v[1], *v[2]])
+    let p = v.map(|p| DVec3::from_array(p.map(f64::from)));
+    let n = (p[1] - p[0]).cross(p[2] - p[0]);
+    (n != DVec3::ZERO && n.is_finite()).then_some([*v[0], *v[1], *v[2]])
 }
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn normalize(v: [f64; 3]) -> Option<[f64; 3]> {
-    // Scale first so tiny (f32-subnormal) normals do not underflow when squared.
-    let m = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+/// `v / |v|`, divided by the largest component first so tiny (f32-subnormal) normals do not underflow
+/// when squared; `None` for a zero or non-finite `v`. (Not glam's `normalize`: that multiplies by the
+/// reciprocal length, which rounds differently.)
+fn unit_normal(v: DVec3) -> Option<DVec3> {
+    let m = 0.0f64.max(v.x.abs()).max(v.y.abs()).max(v.z.abs());
     if !(m > 0.0 && m.is_finite()) {
         return None;
     }
-    let s = v.map(|x| x / m);
-    let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
-    Some(s.map(|x| x / len))
+    let s = v / m;
+    Some(s / s.length())
 }

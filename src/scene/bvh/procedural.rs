@@ -8,6 +8,8 @@
 use std::collections::HashMap;
 use std::path::PathBuf;
 
+use glam::DVec3;
+
 use crate::physics::rng::StreamKey;
 use crate::scene::{Mesh, Scene, SceneFormat};
 
@@ -45,9 +47,9 @@ pub fn scene(meshes: Vec<Mesh>) -> Scene {
 }
 
 /// Unit icosphere: `20·4^subdivisions` triangles, vertices on the unit sphere, outward winding.
-fn unit_icosphere(subdivisions: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+fn unit_icosphere(subdivisions: u32) -> (Vec<DVec3>, Vec<[u32; 3]>) {
     let p = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut verts: Vec<[f64; 3]> = [
+    let mut verts: Vec<DVec3> = [
         [-1.0, p, 0.0],
         [1.0, p, 0.0],
         [-1.0, -p, 0.0],
@@ -62,7 +64,10 @@ fn unit_icosphere(subdivisions: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
         [-p, 0.0, 1.0],
     ]
     .iter()
-    .map(|v| unit(*v))
+    .map(|&v| {
+        let v = DVec3::from_array(v);
+        v / v.length()
+    })
     .collect();
     let mut faces: Vec<[u32; 3]> = vec![
         [0, 11, 5],
@@ -88,10 +93,10 @@ fn unit_icosphere(subdivisions: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
     ];
     for _ in 0..subdivisions {
         let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut midpoint = |a: u32, b: u32, verts: &mut Vec<[f64; 3]>| {
+        let mut midpoint = |a: u32, b: u32, verts: &mut Vec<DVec3>| {
             *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                let (va, vb) = (verts[a as usize], verts[b as usize]);
-                verts.push(unit([0, 1, 2].map(|c| va[c] + vb[c])));
+                let v = verts[a as usize] + verts[b as usize];
+                verts.push(v / v.length());
                 (verts.len() - 1) as u32
             })
         };
@@ -105,17 +110,13 @@ fn unit_icosphere(subdivisions: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
     (verts, faces)
 }
 
-fn unit(v: [f64; 3]) -> [f64; 3] {
-    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    v.map(|x| x / l)
-}
-
 /// A closed icosphere of `20·4^subdivisions` triangles: shared (welded) vertices on the sphere of
 /// `radius` about `center`, unit outward normals, counter-clockwise seen from outside.
 pub fn icosphere(name: &str, center: [f64; 3], radius: f64, subdivisions: u32) -> Mesh {
     let (verts, faces) = unit_icosphere(subdivisions);
-    let positions = verts.iter().map(|v| [0, 1, 2].map(|c| (center[c] + radius * v[c]) as f32)).collect();
-    let normals = verts.iter().map(|v| v.map(|x| x as f32)).collect();
+    let center = DVec3::from_array(center);
+    let positions = verts.iter().map(|&v| (center + radius * v).as_vec3().to_array()).collect();
+    let normals = verts.iter().map(|v| v.as_vec3().to_array()).collect();
     mesh(name, positions, normals, faces)
 }
 

@@ -111,19 +111,20 @@ fn brute_closest(tris: &[(Tri, usize, usize)], ray: &Ray) -> Option<(f64, usize,
 
 /// f64 Möller–Trumbore: (t, barycentrics (b0, b1, b2)) of the line through the triangle's plane.
 fn mt64(v: [[f32; 3]; 3], o: [f64; 3], d: [f64; 3]) -> Option<(f64, [f64; 3])> {
-    let p = v.map(|x| x.map(f64::from));
-    let e1 = [0, 1, 2].map(|c| p[1][c] - p[0][c]);
-    let e2 = [0, 1, 2].map(|c| p[2][c] - p[0][c]);
-    let pv = cross(d, e2);
-    let det = e1[0] * pv[0] + e1[1] * pv[1] + e1[2] * pv[2];
+    let p = v.map(|x| DVec3::from_array(x.map(f64::from)));
+    let (o, d) = (DVec3::from_array(o), DVec3::from_array(d));
+    let e1 = p[1] - p[0];
+    let e2 = p[2] - p[0];
+    let pv = d.cross(e2);
+    let det = e1.dot(pv);
     if det.abs() < 1e-14 {
         return None;
     }
-    let tv = [0, 1, 2].map(|c| o[c] - p[0][c]);
-    let u = (tv[0] * pv[0] + tv[1] * pv[1] + tv[2] * pv[2]) / det;
-    let qv = cross(tv, e1);
-    let v = (d[0] * qv[0] + d[1] * qv[1] + d[2] * qv[2]) / det;
-    let t = (e2[0] * qv[0] + e2[1] * qv[1] + e2[2] * qv[2]) / det;
+    let tv = o - p[0];
+    let u = tv.dot(pv) / det;
+    let qv = tv.cross(e1);
+    let v = d.dot(qv) / det;
+    let t = e2.dot(qv) / det;
     Some((t, [1.0 - u - v, u, v]))
 }
 
@@ -206,7 +207,8 @@ fn hit_fields_are_consistent() {
         for c in 0..3 {
             assert!((x[c] - y[c]).abs() < 1e-5, "point {x:?} vs {y:?}");
         }
-        let n = normalize(cross([0, 1, 2].map(|c| p[1][c] - p[0][c]), [0, 1, 2].map(|c| p[2][c] - p[0][c]))).unwrap();
+        let pv = p.map(DVec3::from_array);
+        let n = unit_normal((pv[1] - pv[0]).cross(pv[2] - pv[0])).unwrap();
         assert!((0..3).all(|c| (n[c] - h.geometric_normal[c]).abs() < 1e-9));
         assert_eq!(h.shading_normal, h.geometric_normal, "the soup has no vertex normals");
         let cos = n[0] * r.direction[0] + n[1] * r.direction[1] + n[2] * r.direction[2];
@@ -347,7 +349,8 @@ fn assert_closed_outward(m: &Mesh, center: [f64; 3]) {
             *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
         }
         let p = t.map(|i| m.positions[i as usize].map(f64::from));
-        let n = cross([0, 1, 2].map(|c| p[1][c] - p[0][c]), [0, 1, 2].map(|c| p[2][c] - p[0][c]));
+        let pv = p.map(DVec3::from_array);
+        let n = (pv[1] - pv[0]).cross(pv[2] - pv[0]);
         let g = [0, 1, 2].map(|c| (p[0][c] + p[1][c] + p[2][c]) / 3.0 - center[c]);
         assert!(n[0] * g[0] + n[1] * g[1] + n[2] * g[2] > 0.0, "{}: inward face {t:?}", m.name);
     }

@@ -184,7 +184,7 @@ fn nested_spheres() {
         // From inside the inner sphere (the innermost medium must be found from the hits ahead).
         assert_segments(&segs(&bvh, &sc, at(0.5), d, INF), &[(0.0, 1.5, inn), (1.5, 2.5, out), (2.5, INF, air)], tol);
         // From between, missing the inner sphere: offset perpendicular to d by 1.5.
-        let perp = normalize(cross(d, [0.3, 0.5, 0.8])).unwrap();
+        let perp = unit_normal(DVec3::from_array(d).cross(DVec3::new(0.3, 0.5, 0.8))).unwrap();
         let o = [0, 1, 2].map(|c| 1.5 * perp[c] - 1.0 * d[c]);
         let exit = 1.0 + (4.0f64 - 2.25).sqrt();
         assert_segments(&segs(&bvh, &sc, o, d, INF), &[(0.0, exit, out), (exit, INF, air)], tol);

@@ -14,6 +14,11 @@
 //! scaled by `t²`. Rect and disk lights emit on the side of their normal only, spheres outward,
 //! emissive triangles on their front (counter-clockwise) side. A directional light's angular size is
 //! ignored (a delta direction).
+//!
+//! Positions, directions and normals are glam `DVec3` (converted from the scene's arrays here); colour
+//! triples stay `[f64; 3]`.
+
+use glam::DVec3;
 
 use crate::render::color::luminance;
 use crate::scene::{LightKind, Mesh, Scene};
@@ -22,9 +27,9 @@ use crate::scene::{LightKind, Mesh, Scene};
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Patch {
     /// Position \[m\].
-    pub position: [f64; 3],
+    pub position: DVec3,
     /// Unit normal of the emitting side.
-    pub normal: [f64; 3],
+    pub normal: DVec3,
     /// Radiant intensity along the normal \[W/sr\] per channel: radiance × area ÷ probability of the
     /// sample (light choice × point choice), so averaging over samples is unbiased.
     pub intensity: [f64; 3],
@@ -36,14 +41,14 @@ pub enum Source {
     /// A point emitting `intensity` \[W/sr\] toward the receiver.
     Point {
         /// Position \[m\].
-        position: [f64; 3],
+        position: DVec3,
         /// Intensity toward the receiver per channel.
         intensity: [f64; 3],
     },
     /// Parallel light arriving from `toward` (unit), `irradiance` \[W/m²\] on a surface facing it.
     Directional {
         /// Unit direction from the receiver to the light.
-        toward: [f64; 3],
+        toward: DVec3,
         /// Irradiance per channel.
         irradiance: [f64; 3],
     },
@@ -54,27 +59,27 @@ pub enum Source {
 /// A delta light.
 #[derive(Debug, Clone, PartialEq)]
 enum Delta {
-    Point { position: [f64; 3], intensity: [f64; 3] },
-    Spot { position: [f64; 3], axis: [f64; 3], cos_outer: f64, scale: f64, intensity: [f64; 3] },
-    Directional { toward: [f64; 3], irradiance: [f64; 3] },
+    Point { position: DVec3, intensity: [f64; 3] },
+    Spot { position: DVec3, axis: DVec3, cos_outer: f64, scale: f64, intensity: [f64; 3] },
+    Directional { toward: DVec3, irradiance: [f64; 3] },
 }
 
 /// One sampleable area light.
 #[derive(Debug, Clone, PartialEq)]
 enum Shape {
     Rect {
-        center: [f64; 3],
-        half_u: [f64; 3],
-        half_v: [f64; 3],
-        normal: [f64; 3],
+        center: DVec3,
+        half_u: DVec3,
+        half_v: DVec3,
+        normal: DVec3,
     },
     Disk {
-        center: [f64; 3],
-        normal: [f64; 3],
+        center: DVec3,
+        normal: DVec3,
         radius: f64,
     },
     Sphere {
-        center: [f64; 3],
+        center: DVec3,
         radius: f64,
     },
     /// Triangles (world positions, unit geometric normal) with their cumulative areas.
@@ -112,37 +117,37 @@ impl BakeLights {
             }
             match &light.kind {
                 LightKind::Point { position } => {
-                    out.deltas.push(Delta::Point { position: *position, intensity: rgb });
+                    out.deltas.push(Delta::Point { position: DVec3::from_array(*position), intensity: rgb });
                 }
                 LightKind::Spot { position, direction, inner_cone, outer_cone } => {
-                    let Some(axis) = unit(*direction) else { continue };
+                    let Some(axis) = unit(DVec3::from_array(*direction)) else { continue };
                     let (ci, co) = (inner_cone.cos(), outer_cone.cos());
                     let scale = 1.0 / (ci - co).max(1e-3);
-                    out.deltas.push(Delta::Spot { position: *position, axis, cos_outer: co, scale, intensity: rgb });
+                    let position = DVec3::from_array(*position);
+                    out.deltas.push(Delta::Spot { position, axis, cos_outer: co, scale, intensity: rgb });
                 }
                 LightKind::Directional { direction, .. } => {
-                    let Some(d) = unit(*direction) else { continue };
-                    out.deltas.push(Delta::Directional { toward: d.map(|c| -c), irradiance: rgb });
+                    let Some(d) = unit(DVec3::from_array(*direction)) else { continue };
+                    out.deltas.push(Delta::Directional { toward: -d, irradiance: rgb });
                 }
                 LightKind::Rect { center, half_u, half_v, normal } => {
-                    let area = 4.0 * norm(cross(*half_u, *half_v));
-                    if let Some(n) = unit(*normal) {
-                        out.push_area(
-                            Shape::Rect { center: *center, half_u: *half_u, half_v: *half_v, normal: n },
-                            area,
-                            rgb,
-                        );
+                    let (half_u, half_v) = (DVec3::from_array(*half_u), DVec3::from_array(*half_v));
+                    let area = 4.0 * half_u.cross(half_v).length();
+                    if let Some(n) = unit(DVec3::from_array(*normal)) {
+                        let center = DVec3::from_array(*center);
+                        out.push_area(Shape::Rect { center, half_u, half_v, normal: n }, area, rgb);
                     }
                 }
                 LightKind::Disk { center, normal, radius } => {
-                    if let Some(n) = unit(*normal) {
+                    if let Some(n) = unit(DVec3::from_array(*normal)) {
                         let area = std::f64::consts::PI * radius * radius;
-                        out.push_area(Shape::Disk { center: *center, normal: n, radius: *radius }, area, rgb);
+                        let center = DVec3::from_array(*center);
+                        out.push_area(Shape::Disk { center, normal: n, radius: *radius }, area, rgb);
                     }
                 }
                 LightKind::Sphere { center, radius } => {
                     let area = 4.0 * std::f64::consts::PI * radius * radius;
-                    out.push_area(Shape::Sphere { center: *center, radius: *radius }, area, rgb);
+                    out.push_area(Shape::Sphere { center: DVec3::from_array(*center), radius: *radius }, area, rgb);
                 }
                 LightKind::EmissiveMesh { mesh } => {
                     if let Some(m) = scene.meshes.get(*mesh) {
@@ -188,7 +193,7 @@ impl BakeLights {
     /// The delta lights as seen from `x`: point and spot lights as [`Source::Point`] (spot falloff
     /// applied toward `x`; lights whose intensity toward `x` is 0 are left out), directional lights as
     /// [`Source::Directional`].
-    pub fn deltas_toward(&self, x: [f64; 3], out: &mut Vec<Source>) {
+    pub fn deltas_toward(&self, x: DVec3, out: &mut Vec<Source>) {
         out.clear();
         for d in &self.deltas {
             match d {
@@ -196,8 +201,8 @@ impl BakeLights {
                     out.push(Source::Point { position: *position, intensity: *intensity });
                 }
                 Delta::Spot { position, axis, cos_outer, scale, intensity } => {
-                    let Some(to_x) = unit(sub(x, *position)) else { continue };
-                    let t = ((dot(to_x, *axis) - cos_outer) * scale).clamp(0.0, 1.0);
+                    let Some(to_x) = unit(x - *position) else { continue };
+                    let t = ((to_x.dot(*axis) - cos_outer) * scale).clamp(0.0, 1.0);
                     if t > 0.0 {
                         out.push(Source::Point { position: *position, intensity: intensity.map(|c| c * t * t) });
                     }
@@ -221,21 +226,21 @@ impl BakeLights {
         let (position, normal) = match &a.shape {
             Shape::Rect { center, half_u, half_v, normal } => {
                 let (s, t) = (2.0 * u[1] - 1.0, 2.0 * u[2] - 1.0);
-                ([0, 1, 2].map(|c| center[c] + s * half_u[c] + t * half_v[c]), *normal)
+                (*center + s * *half_u + t * *half_v, *normal)
             }
             Shape::Disk { center, normal, radius } => {
                 let (e1, e2) = frame(*normal);
                 let r = radius * u[1].sqrt();
                 let phi = 2.0 * std::f64::consts::PI * u[2];
                 let (a1, a2) = (r * phi.cos(), r * phi.sin());
-                ([0, 1, 2].map(|c| center[c] + a1 * e1[c] + a2 * e2[c]), *normal)
+                (*center + a1 * e1 + a2 * e2, *normal)
             }
             Shape::Sphere { center, radius } => {
                 let z = 1.0 - 2.0 * u[1];
                 let s = (1.0 - z * z).max(0.0).sqrt();
                 let phi = 2.0 * std::f64::consts::PI * u[2];
-                let n = [s * phi.cos(), s * phi.sin(), z];
-                ([0, 1, 2].map(|c| center[c] + radius * n[c]), n)
+                let n = DVec3::new(s * phi.cos(), s * phi.sin(), z);
+                (*center + *radius * n, n)
             }
             Shape::Triangles { tris, cdf } => {
                 let total = *cdf.last()?;
@@ -246,7 +251,7 @@ impl BakeLights {
                 let (p, n) = &tris[k];
                 let su = u[1].sqrt();
                 let (b1, b2) = (1.0 - su, u[2] * su);
-                ([0, 1, 2].map(|c| p[0][c] + b1 * (p[1][c] - p[0][c]) + b2 * (p[2][c] - p[0][c])), *n)
+                (p[0] + b1 * (p[1] - p[0]) + b2 * (p[2] - p[0]), *n)
             }
         };
         let w = a.area / p_choice;
@@ -259,7 +264,7 @@ fn power(a: &Area) -> f64 {
 }
 
 /// A world triangle and its unit geometric normal.
-type WorldTriangle = ([[f64; 3]; 3], [f64; 3]);
+type WorldTriangle = ([DVec3; 3], DVec3);
 
 /// World triangles of `m` with unit geometric normals (degenerate ones left out) and cumulative areas.
 fn triangles(m: &Mesh) -> (Vec<WorldTriangle>, Vec<f64>) {
@@ -267,13 +272,15 @@ fn triangles(m: &Mesh) -> (Vec<WorldTriangle>, Vec<f64>) {
     let mut cdf = Vec::new();
     let mut acc = 0.0;
     for t in &m.triangles {
-        let Some(p) =
-            t.iter().map(|&i| m.positions.get(i as usize).map(|v| v.map(f64::from))).collect::<Option<Vec<_>>>()
+        let Some(p) = t
+            .iter()
+            .map(|&i| m.positions.get(i as usize).map(|v| DVec3::from_array(v.map(f64::from))))
+            .collect::<Option<Vec<_>>>()
         else {
             continue;
         };
-        let c = cross(sub(p[1], p[0]), sub(p[2], p[0]));
-        let (Some(n), area) = (unit(c), 0.5 * norm(c)) else { continue };
+        let c = (p[1] - p[0]).cross(p[2] - p[0]);
+        let (Some(n), area) = (unit(c), 0.5 * c.length()) else { continue };
         acc += area;
         tris.push(([p[0], p[1], p[2]], n));
         cdf.push(acc);
@@ -282,32 +289,17 @@ fn triangles(m: &Mesh) -> (Vec<WorldTriangle>, Vec<f64>) {
 }
 
 /// An orthonormal pair perpendicular to the unit vector `n`.
-pub fn frame(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+pub fn frame(n: DVec3) -> (DVec3, DVec3) {
     // Duff et al. 2017, "Building an orthonormal basis, revisited".
-    let s = 1f64.copysign(n[2]);
-    let a = -1.0 / (s + n[2]);
-    let b = n[0] * n[1] * a;
-    ([1.0 + s * n[0] * n[0] * a, s * b, -s * n[0]], [b, s + n[1] * n[1] * a, -n[1]])
+    let s = 1f64.copysign(n.z);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    (DVec3::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x), DVec3::new(b, s + n.y * n.y * a, -n.y))
 }
 
-pub(super) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-pub(super) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-pub(super) fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-
-/// `a / |a|`, or `None` for a zero or non-finite vector.
-pub(super) fn unit(a: [f64; 3]) -> Option<[f64; 3]> {
-    let n = norm(a);
-    (n > 0.0 && n.is_finite()).then(|| a.map(|c| c / n))
+/// `a / |a|`, or `None` for a zero or non-finite vector. (Not glam's `try_normalize`, which multiplies
+/// by the reciprocal length and so rounds differently.)
+pub(super) fn unit(a: DVec3) -> Option<DVec3> {
+    let n = a.length();
+    (n > 0.0 && n.is_finite()).then(|| a / n)
 }

@@ -35,8 +35,10 @@
 //! thread count. The first bounce uses a randomly shifted rank-1 lattice (two 2-D point sets, for the
 //! area-light point and the bounce direction); deeper bounces use plain counter-based uniforms.
 
+use glam::DVec3;
+
 use super::BakeMode;
-use super::lights::{BakeLights, Patch, Source, dot, frame, norm, sub, unit};
+use super::lights::{BakeLights, Patch, Source, frame, unit};
 use crate::physics::rng::{SampleStream, StreamKey};
 use crate::scene::bvh::{Hit, Ray, SceneBvh, optical_thickness};
 use crate::scene::{Boundary, Scene, Surface};
@@ -143,7 +145,7 @@ pub struct Transport<'a> {
     pass_through: Vec<bool>,
     any_pass_through: bool,
     has_media: bool,
-    world: ([f64; 3], [f64; 3]),
+    world: (DVec3, DVec3),
     eps: f64,
     query: QueryOptions,
     key: u64,
@@ -192,7 +194,7 @@ impl<'a> Transport<'a> {
                 bounds && matched
             })
             .collect();
-        let world = scene.bounds().unwrap_or(([0.0; 3], [0.0; 3]));
+        let world = scene.bounds().map_or((DVec3::ZERO, DVec3::ZERO), |(lo, hi)| (lo.into(), hi.into()));
         let eps = (1e-5 * scene.diagonal()).max(1e-5);
         let key = crate::physics::rng::StreamKey { table: 0x6c69_6768_746d_6170 ^ opts.seed, cell: 0 }.sample(0);
         Ok(Transport {
@@ -220,6 +222,7 @@ impl<'a> Transport<'a> {
     /// Irradiance at the surface point `x` with shading normal `n` and geometric normal `ng` (both unit,
     /// on the side light is gathered from), estimated with the options' samples and bounces.
     pub fn receiver(&self, x: [f64; 3], n: [f64; 3], ng: [f64; 3], cell: u64) -> Result<Estimate, TransportError> {
+        let (x, n, ng) = (DVec3::from_array(x), DVec3::from_array(n), DVec3::from_array(ng));
         let mut rays = 0u64;
         let delta = self.delta_irradiance(x, n, ng, 1.0, &mut rays)?.total();
         let samples = self.opts.samples.max(1);
@@ -265,10 +268,11 @@ impl<'a> Transport<'a> {
     /// directions, and in [`BakeMode::Full`] the scattered radiance of every connection (the table's world-SH
     /// lobe, no back-scatter shift: a probe has no surface).
     pub fn probe(&self, x: [f64; 3], cell: u64) -> Result<[[f64; PROBE_SH]; 3], TransportError> {
+        let x = DVec3::from_array(x);
         let mut sh = [[0.0; PROBE_SH]; 3];
         let mut y = [0.0; PROBE_SH];
-        let mut add = |dir: [f64; 3], w: [f64; 3], sh: &mut [[f64; PROBE_SH]; 3]| {
-            crate::physics::sh::sh_eval_into(3, dir, &mut y);
+        let mut add = |dir: DVec3, w: [f64; 3], sh: &mut [[f64; PROBE_SH]; 3]| {
+            crate::physics::sh::sh_eval_into(3, dir.to_array(), &mut y);
             for c in 0..3 {
                 for i in 0..PROBE_SH {
                     sh[c][i] += w[c] * y[i];
@@ -283,7 +287,7 @@ impl<'a> Transport<'a> {
                 Source::Point { position, intensity } => {
                     let (to, d) = direction_to(x, position);
                     let d = d.max(MIN_DISTANCE);
-                    let pos = [0, 1, 2].map(|c| x[c] + to[c] * d);
+                    let pos = (x + to * d).to_array();
                     (to, d, intensity, 1.0 / (d * d), Emitter::Point { intensity: 1.0, position: pos })
                 }
                 Source::Directional { toward, irradiance } => {
@@ -293,7 +297,7 @@ impl<'a> Transport<'a> {
                         depth,
                         irradiance,
                         1.0,
-                        Emitter::Directional { irradiance: 1.0, toward_light: toward, depth },
+                        Emitter::Directional { irradiance: 1.0, toward_light: toward.to_array(), depth },
                     )
                 }
                 Source::Patch(_) => continue,
@@ -316,9 +320,9 @@ impl<'a> Transport<'a> {
                 let t_max = d - (1e-4 * d).max(self.eps);
                 if t_max <= 0.0 || self.visible(x, to, t_max) {
                     let d = d.max(MIN_DISTANCE);
-                    let unit_radiance = (-dot(to, p.normal)).max(0.0) / (d * d);
-                    let pos = [0, 1, 2].map(|c| x[c] + to[c] * d);
-                    let emitter = Emitter::Area { intensity: 1.0, position: pos, normal: p.normal };
+                    let unit_radiance = (-to.dot(p.normal)).max(0.0) / (d * d);
+                    let pos = (x + to * d).to_array();
+                    let emitter = Emitter::Area { intensity: 1.0, position: pos, normal: p.normal.to_array() };
                     self.probe_connection(x, to, d, p.intensity, unit_radiance, 1.0, &emitter, w_s, &mut sh, &mut add)?;
                 }
             }
@@ -328,14 +332,14 @@ impl<'a> Transport<'a> {
             let z = 1.0 - 2.0 * s.uniform(3);
             let r = (1.0 - z * z).max(0.0).sqrt();
             let phi = 2.0 * std::f64::consts::PI * s.uniform(4);
-            let dir = [r * phi.cos(), r * phi.sin(), z];
+            let dir = DVec3::new(r * phi.cos(), r * phi.sin(), z);
             rays += 1;
             let Some(hit) = self.trace(x, dir) else { continue };
             let rho = self.albedo.get(hit.mesh).copied().unwrap_or([0.0; 3]);
             if rho.iter().all(|&a| a == 0.0) {
                 continue;
             }
-            let yp = [0, 1, 2].map(|c| x[c] + hit.t * dir[c]);
+            let yp = x + hit.t * dir;
             let (ny, nyg) = facing(&hit, dir);
             let uy = [0, 1, 2, 3, 4].map(|d| s.uniform(8 + d));
             let ed = self.delta_irradiance(yp, ny, nyg, 1.0, &mut rays)?;
@@ -343,11 +347,11 @@ impl<'a> Transport<'a> {
             let (ed, es) = (ed.total(), es.total());
             let l_o = [0, 1, 2].map(|c| rho[c] / std::f64::consts::PI * (ed[c] + es[c]));
             let four_pi = 4.0 * std::f64::consts::PI;
-            let cos_y = (-dot(dir, ny)).max(GRAZING_FLOOR);
+            let cos_y = (-dir.dot(ny)).max(GRAZING_FLOOR);
             let d = hit.t;
             // Direct: the radiance L_o itself over the sampling pdf 1/(4π); scattered: the patch
             // dA = 4π r² / cos θ_y.
-            let emitter = Emitter::Area { intensity: 1.0, position: yp, normal: ny };
+            let emitter = Emitter::Area { intensity: 1.0, position: yp.to_array(), normal: ny.to_array() };
             let scale = four_pi * d * d / cos_y;
             self.probe_connection(x, dir, d, l_o, four_pi, scale, &emitter, w_s, &mut sh, &mut add)?;
         }
@@ -360,8 +364,8 @@ impl<'a> Transport<'a> {
     #[allow(clippy::too_many_arguments)]
     fn probe_connection(
         &self,
-        x: [f64; 3],
-        to: [f64; 3],
+        x: DVec3,
+        to: DVec3,
         length: f64,
         strength: [f64; 3],
         unit_radiance: f64,
@@ -369,7 +373,7 @@ impl<'a> Transport<'a> {
         emitter: &Emitter,
         w: f64,
         sh: &mut [[f64; PROBE_SH]; 3],
-        add: &mut impl FnMut([f64; 3], [f64; 3], &mut [[f64; PROBE_SH]; 3]),
+        add: &mut impl FnMut(DVec3, [f64; 3], &mut [[f64; PROBE_SH]; 3]),
     ) -> Result<(), TransportError> {
         let along =
             if self.opts.mode == BakeMode::Surface || !self.has_media { None } else { self.along(x, to, length) };
@@ -380,7 +384,7 @@ impl<'a> Transport<'a> {
         }
         let Some(a) = along else { return Ok(()) };
         let table = self.table.ok_or(TransportError::NoTable)?;
-        let receiver = Receiver { position: x, normal: to };
+        let receiver = Receiver { position: x.to_array(), normal: to.to_array() };
         let query = QueryOptions { backscatter: false, ..self.query };
         for c in 0..3 {
             let ch = a.channels[c];
@@ -397,14 +401,7 @@ impl<'a> Transport<'a> {
     }
 
     /// Irradiance from the delta lights (deterministic).
-    fn delta_irradiance(
-        &self,
-        x: [f64; 3],
-        n: [f64; 3],
-        ng: [f64; 3],
-        sw: f64,
-        rays: &mut u64,
-    ) -> Result<Irr, TransportError> {
+    fn delta_irradiance(&self, x: DVec3, n: DVec3, ng: DVec3, sw: f64, rays: &mut u64) -> Result<Irr, TransportError> {
         let mut sources = Vec::with_capacity(self.lights.delta_count());
         self.lights.deltas_toward(x, &mut sources);
         let mut e = Irr::default();
@@ -418,9 +415,9 @@ impl<'a> Transport<'a> {
     #[allow(clippy::too_many_arguments)]
     fn sampled_irradiance(
         &self,
-        x: [f64; 3],
-        n: [f64; 3],
-        ng: [f64; 3],
+        x: DVec3,
+        n: DVec3,
+        ng: DVec3,
         u: [f64; 5],
         s: &SampleStream,
         (depth, bounces): (u32, u32),
@@ -439,14 +436,14 @@ impl<'a> Transport<'a> {
         let r = u[3].sqrt();
         let phi = 2.0 * std::f64::consts::PI * u[4];
         let z = (1.0 - u[3]).max(0.0).sqrt();
-        let dir = [0, 1, 2].map(|c| r * phi.cos() * t1[c] + r * phi.sin() * t2[c] + z * n[c]);
-        if dot(dir, ng) <= 0.0 {
+        let dir = r * phi.cos() * t1 + r * phi.sin() * t2 + z * n;
+        if dir.dot(ng) <= 0.0 {
             return Ok(e); // below the geometric surface (shading-normal mismatch)
         }
         let origin = offset(x, ng, self.eps);
         *rays += 1;
         let Some(hit) = self.trace(origin, dir) else { return Ok(e) };
-        let y = [0, 1, 2].map(|c| origin[c] + hit.t * dir[c]);
+        let y = origin + hit.t * dir;
         let rho = self.albedo.get(hit.mesh).copied().unwrap_or([0.0; 3]);
         if rho.iter().all(|&a| a == 0.0) {
             return Ok(e);
@@ -471,11 +468,11 @@ impl<'a> Transport<'a> {
             e.scat[c] += std::f64::consts::PI * l_scat[c] * t[c];
         }
         if scattered_weight && let Some(a) = along {
-            let cos_x = dot(dir, n).max(1e-6);
-            let cos_y = (-dot(dir, ny)).max(GRAZING_FLOOR);
-            let r = hit.t * norm(dir);
+            let cos_x = dir.dot(n).max(1e-6);
+            let cos_y = (-dir.dot(ny)).max(GRAZING_FLOOR);
+            let r = hit.t * dir.length();
             let w = std::f64::consts::PI * r * r / (cos_x * cos_y);
-            let patch = Emitter::Area { intensity: 1.0, position: y, normal: ny };
+            let patch = Emitter::Area { intensity: 1.0, position: y.to_array(), normal: ny.to_array() };
             let sc = self.scattered(&a, &patch, x, n)?;
             for c in 0..3 {
                 // Plain light from y gets this query's weight; light already queried keeps its own.
@@ -488,9 +485,9 @@ impl<'a> Transport<'a> {
     /// Irradiance at `x` from one light connection (visibility tested), split into direct and scattered.
     fn connect_light(
         &self,
-        x: [f64; 3],
-        n: [f64; 3],
-        ng: [f64; 3],
+        x: DVec3,
+        n: DVec3,
+        ng: DVec3,
         src: &Source,
         sw: f64,
         rays: &mut u64,
@@ -505,9 +502,9 @@ impl<'a> Transport<'a> {
                     return Ok(Split::default());
                 }
                 let d = d.max(MIN_DISTANCE);
-                let cos = dot(to, n).max(0.0);
+                let cos = to.dot(n).max(0.0);
                 let direct_unit = cos / (d * d);
-                let emitter = Emitter::Point { intensity: 1.0, position: [0, 1, 2].map(|c| x[c] + to[c] * d) };
+                let emitter = Emitter::Point { intensity: 1.0, position: (x + to * d).to_array() };
                 self.weigh((origin, to, d), (x, n), direct_unit, intensity, &emitter, sw)
             }
             Source::Directional { toward, irradiance } => {
@@ -516,8 +513,8 @@ impl<'a> Transport<'a> {
                     return Ok(Split::default());
                 }
                 let depth = exit_distance(origin, toward, self.world);
-                let direct_unit = dot(toward, n).max(0.0);
-                let emitter = Emitter::Directional { irradiance: 1.0, toward_light: toward, depth };
+                let direct_unit = toward.dot(n).max(0.0);
+                let emitter = Emitter::Directional { irradiance: 1.0, toward_light: toward.to_array(), depth };
                 self.weigh((origin, toward, depth), (x, n), direct_unit, irradiance, &emitter, sw)
             }
             Source::Patch(Patch { position, normal, intensity }) => {
@@ -529,8 +526,9 @@ impl<'a> Transport<'a> {
                     return Ok(Split::default());
                 }
                 let d = d.max(MIN_DISTANCE);
-                let direct_unit = dot(to, n).max(0.0) * (-dot(to, normal)).max(0.0) / (d * d);
-                let emitter = Emitter::Area { intensity: 1.0, position: [0, 1, 2].map(|c| x[c] + to[c] * d), normal };
+                let direct_unit = to.dot(n).max(0.0) * (-to.dot(normal)).max(0.0) / (d * d);
+                let position = (x + to * d).to_array();
+                let emitter = Emitter::Area { intensity: 1.0, position, normal: normal.to_array() };
                 self.weigh((origin, to, d), (x, n), direct_unit, intensity, &emitter, sw)
             }
         }
@@ -540,8 +538,8 @@ impl<'a> Transport<'a> {
     #[allow(clippy::too_many_arguments)]
     fn weigh(
         &self,
-        (origin, to, length): ([f64; 3], [f64; 3], f64),
-        (x, n): ([f64; 3], [f64; 3]),
+        (origin, to, length): (DVec3, DVec3, f64),
+        (x, n): (DVec3, DVec3),
         direct_unit: f64,
         strength: [f64; 3],
         emitter: &Emitter,
@@ -566,9 +564,9 @@ impl<'a> Transport<'a> {
 
     /// Scattered irradiance (single + multiple) per channel for a unit-strength emitter, querying the table
     /// once per distinct effective medium among the channels.
-    fn scattered(&self, a: &Along, emitter: &Emitter, x: [f64; 3], n: [f64; 3]) -> Result<[f64; 3], TransportError> {
+    fn scattered(&self, a: &Along, emitter: &Emitter, x: DVec3, n: DVec3) -> Result<[f64; 3], TransportError> {
         let table = self.table.ok_or(TransportError::NoTable)?;
-        let receiver = Receiver { position: x, normal: n };
+        let receiver = Receiver { position: x.to_array(), normal: n.to_array() };
         let mut out = [0.0; 3];
         for c in 0..3 {
             let ch = a.channels[c];
@@ -588,11 +586,11 @@ impl<'a> Transport<'a> {
 
     /// Transmittance and effective coefficients along `origin + t·dir`, `t ∈ [0, length]` (`dir` unit);
     /// `None` when no medium is crossed.
-    fn along(&self, origin: [f64; 3], dir: [f64; 3], length: f64) -> Option<Along> {
+    fn along(&self, origin: DVec3, dir: DVec3, length: f64) -> Option<Along> {
         if length.is_nan() || length <= 0.0 {
             return None;
         }
-        let ray = Ray::new(origin, dir);
+        let ray = Ray::new(origin.to_array(), dir.to_array());
         let segs = self.bvh.media_segments(self.scene, &ray, length);
         let (mut tau_t, mut tau_s, mut tau_a, mut tau_g) = ([0.0f64; 3], [0.0f64; 3], [0.0f64; 3], [0.0f64; 3]);
         let mut any = false;
@@ -624,12 +622,13 @@ impl<'a> Transport<'a> {
     }
 
     /// Closest opaque hit along `origin + t·dir`, passing through index-matched medium boundaries.
-    fn trace(&self, origin: [f64; 3], dir: [f64; 3]) -> Option<Hit> {
-        self.trace_ray(Ray::new(origin, dir))
+    fn trace(&self, origin: DVec3, dir: DVec3) -> Option<Hit> {
+        self.trace_ray(Ray::new(origin.to_array(), dir.to_array()))
     }
 
     /// Whether `origin + t·dir`, `t ∈ (0, t_max)`, is free of opaque surfaces.
-    fn visible(&self, origin: [f64; 3], dir: [f64; 3], t_max: f64) -> bool {
+    fn visible(&self, origin: DVec3, dir: DVec3, t_max: f64) -> bool {
+        let (origin, dir) = (origin.to_array(), dir.to_array());
         if !self.any_pass_through {
             return !self.bvh.occluded(origin, dir, t_max);
         }
@@ -654,32 +653,32 @@ impl<'a> Transport<'a> {
 pub use crate::render::color::luminance;
 
 /// `x` moved `eps` along `n`.
-fn offset(x: [f64; 3], n: [f64; 3], eps: f64) -> [f64; 3] {
-    [0, 1, 2].map(|c| x[c] + eps * n[c])
+fn offset(x: DVec3, n: DVec3, eps: f64) -> DVec3 {
+    x + eps * n
 }
 
 /// Unit direction and distance from `a` to `b` (`+z`, 0 when they coincide).
-fn direction_to(a: [f64; 3], b: [f64; 3]) -> ([f64; 3], f64) {
-    let v = sub(b, a);
-    let d = norm(v);
+fn direction_to(a: DVec3, b: DVec3) -> (DVec3, f64) {
+    let v = b - a;
+    let d = v.length();
     match unit(v) {
         Some(u) => (u, d),
-        None => ([0.0, 0.0, 1.0], 0.0),
+        None => (DVec3::Z, 0.0),
     }
 }
 
 /// Shading and geometric normals of a hit, turned to face against `dir`.
-fn facing(hit: &Hit, dir: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-    let ng = unit(hit.geometric_normal).unwrap_or([0.0, 0.0, 1.0]);
-    let ng = if dot(ng, dir) > 0.0 { ng.map(|c| -c) } else { ng };
-    let ns = unit(hit.shading_normal).unwrap_or(ng);
-    let ns = if dot(ns, ng) < 0.0 { ns.map(|c| -c) } else { ns };
+fn facing(hit: &Hit, dir: DVec3) -> (DVec3, DVec3) {
+    let ng = unit(DVec3::from_array(hit.geometric_normal)).unwrap_or(DVec3::Z);
+    let ng = if ng.dot(dir) > 0.0 { -ng } else { ng };
+    let ns = unit(DVec3::from_array(hit.shading_normal)).unwrap_or(ng);
+    let ns = if ns.dot(ng) < 0.0 { -ns } else { ns };
     (ns, ng)
 }
 
 /// Distance from `o` along unit `d` to where the ray leaves the box `world` (0 when `o` is outside and
 /// moving away).
-fn exit_distance(o: [f64; 3], d: [f64; 3], world: ([f64; 3], [f64; 3])) -> f64 {
+fn exit_distance(o: DVec3, d: DVec3, world: (DVec3, DVec3)) -> f64 {
     let mut t_exit = f64::INFINITY;
     for c in 0..3 {
         if d[c] > 0.0 {

@@ -25,9 +25,11 @@ use std::collections::{BTreeSet, HashMap};
 use std::f64::consts::PI;
 use std::path::Path;
 
+use glam::DVec3;
+
 use super::{LobeKind, MsLobes, MsLobesRaw};
 use crate::container::{ArrayDesc, ArrayValues};
-use crate::physics::lobe_transport::{GradedAxis, cross, decay_rate, dot};
+use crate::physics::lobe_transport::{GradedAxis, decay_rate};
 use crate::tables::TableDef;
 
 /// Failure to load an `MsLobes` table.
@@ -498,42 +500,43 @@ pub(super) fn beam_coordinates(
     if !(st.is_finite() && st > 0.0) {
         return Err(format!("sigma_t = {st} must be finite and > 0"));
     }
-    let unit = |v: [f64; 3], name: &str| -> Result<[f64; 3], String> {
-        let n = dot(v, v).sqrt();
+    let unit = |v: [f64; 3], name: &str| -> Result<DVec3, String> {
+        let v = DVec3::from_array(v);
+        let n = v.length();
         if !(n.is_finite() && n > 0.0) {
             return Err(format!("{name} must be a finite non-zero vector"));
         }
-        Ok([v[0] / n, v[1] / n, v[2] / n])
+        Ok(v / n)
     };
     let d = unit(direction, "the beam direction")?;
     let w = unit(omega, "omega")?;
-    let p = [x[0] - origin[0], x[1] - origin[1], x[2] - origin[2]];
-    if !p.iter().all(|c| c.is_finite()) {
+    let p = DVec3::from_array(x) - DVec3::from_array(origin);
+    if !p.is_finite() {
         return Err("the point and the beam origin must be finite".into());
     }
-    let z = dot(p, d);
-    let perp = [p[0] - z * d[0], p[1] - z * d[1], p[2] - z * d[2]];
-    let rho = dot(perp, perp).sqrt();
-    let r = dot(p, p).sqrt();
+    let z = p.dot(d);
+    let perp = p - z * d;
+    let rho = perp.length();
+    let r = p.length();
     let (a, e1) = if r > 0.0 {
-        let a = [p[0] / r, p[1] / r, p[2] / r];
+        let a = p / r;
         // φ's reference direction only matters to a φ-resolved lobe.
         let e1 = if lobe != LobeKind::Full {
-            [0.0; 3]
+            DVec3::ZERO
         } else if rho > 0.0 {
-            let rh = [perp[0] / rho, perp[1] / rho, perp[2] / rho];
-            [(z * rh[0] - rho * d[0]) / r, (z * rh[1] - rho * d[1]) / r, (z * rh[2] - rho * d[2]) / r]
+            let rh = perp / rho;
+            (z * rh - rho * d) / r
         } else {
-            crate::physics::lobe_transport::lobe_frame([0.0, 0.0, 1.0]).1
+            crate::physics::lobe_transport::lobe_frame(DVec3::Z).1
         };
         (a, e1)
     } else {
-        (d, [0.0; 3])
+        (d, DVec3::ZERO)
     };
-    let theta = dot(a, w).clamp(-1.0, 1.0).acos();
-    let phi = if lobe == LobeKind::Full && dot(e1, e1) > 0.0 {
-        let e2 = cross(a, e1);
-        dot(w, e2).abs().atan2(dot(w, e1))
+    let theta = a.dot(w).clamp(-1.0, 1.0).acos();
+    let phi = if lobe == LobeKind::Full && e1.dot(e1) > 0.0 {
+        let e2 = a.cross(e1);
+        w.dot(e2).abs().atan2(w.dot(e1))
     } else {
         0.0
     };

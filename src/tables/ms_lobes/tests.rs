@@ -146,7 +146,7 @@ fn full_lobe_matches_pointwise_quadrature() {
     for (theta, phi) in [(0.6, 0.0), (0.6, std::f64::consts::PI), (1.4, 1.0), (2.4, 2.5)] {
         let ((rc, zc), want) = cell_average(&def, 1.5, 1.0, &|r, zz| {
             let p = [r, 0.0, zz];
-            let (ax, e1, e2) = crate::physics::lobe_transport::lobe_frame(p);
+            let (ax, e1, e2) = crate::physics::lobe_transport::lobe_frame(p.into());
             let (st, ct) = (f64::sin(theta), f64::cos(theta));
             let w: [f64; 3] =
                 std::array::from_fn(|i| ct * ax[i] + st * (f64::cos(phi) * e1[i] + f64::sin(phi) * e2[i]));

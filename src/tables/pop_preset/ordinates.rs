@@ -6,6 +6,7 @@
 //! and mean cosine. Invariant: every result is a pure function of its inputs (no randomness, fixed
 //! chunking and merge order), so tables are byte-identical for any thread count.
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 /// `1/Φ²` with `Φ = (1 + √5)/2` the golden ratio: `2π/Φ²` is the golden angle.
@@ -30,11 +31,6 @@ pub fn fibonacci_directions(n: usize) -> Vec<[f64; 3]> {
     (0..n as u64).map(|i| fibonacci_direction(i, n as u64)).collect()
 }
 
-/// Dot product.
-pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
 /// Exact nearest-direction search over a direction set, by a sweep in z.
 ///
 /// The geodesic angle between two unit vectors bounds the difference of their z components
@@ -44,7 +40,7 @@ pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 pub struct NearestDirection {
     /// (z, original index), ascending in z.
     by_z: Vec<(f64, usize)>,
-    dirs: Vec<[f64; 3]>,
+    dirs: Vec<DVec3>,
 }
 
 impl NearestDirection {
@@ -52,13 +48,14 @@ impl NearestDirection {
     pub fn new(dirs: &[[f64; 3]]) -> Self {
         let mut by_z: Vec<(f64, usize)> = dirs.iter().enumerate().map(|(i, d)| (d[2], i)).collect();
         by_z.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        Self { by_z, dirs: dirs.to_vec() }
+        Self { by_z, dirs: dirs.iter().map(|&d| DVec3::from_array(d)).collect() }
     }
 
     /// Index of the direction nearest to `w` (a unit vector) and the cosine of the angle to it;
     /// `None` for an empty set.
     pub fn nearest(&self, w: [f64; 3]) -> Option<(usize, f64)> {
         let n = self.by_z.len();
+        let wv = DVec3::from_array(w);
         let p = self.by_z.partition_point(|e| e.0 < w[2]);
         let (mut lo, mut hi) = (p, p); // candidates: lo − 1 downwards, hi upwards
         let mut best: Option<(usize, f64)> = None;
@@ -77,7 +74,7 @@ impl NearestDirection {
             } else {
                 break;
             };
-            let c = dot(self.dirs[j], w);
+            let c = self.dirs[j].dot(wv);
             let better = match best {
                 None => true,
                 Some((bi, bc)) => c > bc || (c == bc && j < bi),

@@ -10,9 +10,10 @@
 use std::f64::consts::{FRAC_1_SQRT_2, PI};
 use std::path::Path;
 
+use glam::DVec3;
 use rayon::prelude::*;
 
-use super::ordinates::{NearestDirection, dot};
+use super::ordinates::NearestDirection;
 use super::{PopPreset, PopPresetRaw};
 use crate::container::{ArrayDesc, ArrayValues};
 use crate::physics::rng::StreamKey;
@@ -198,11 +199,11 @@ impl PopPresetTable {
                     let z = 1.0 - 2.0 * s.uniform(0);
                     let r = ((1.0 - z) * (1.0 + z)).max(0.0).sqrt();
                     let phi = 2.0 * PI * s.uniform(1);
-                    let w = [r * phi.cos(), r * phi.sin(), z];
+                    let w = DVec3::new(r * phi.cos(), r * phi.sin(), z);
                     // Brute force: shares no code with the generator's sweep search.
                     let (mut best, mut best_cos) = (0, f64::NEG_INFINITY);
                     for (j, d) in self.ordinates.iter().enumerate() {
-                        let c = dot(*d, w);
+                        let c = DVec3::from_array(*d).dot(w);
                         if c > best_cos {
                             (best, best_cos) = (j, c);
                         }

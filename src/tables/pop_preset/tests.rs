@@ -2,7 +2,8 @@
 
 use std::f64::consts::{FRAC_1_SQRT_2, PI};
 
-use super::ordinates::dot;
+use glam::DVec3;
+
 use super::ordinates::{cell_quadrature, fibonacci_directions, quadrature_samples};
 use super::*;
 use crate::container::{EncodeOptions, Header, encode};
@@ -61,7 +62,7 @@ fn solid_angles_sum_to_four_pi_and_cells_are_nearly_equal() {
         let t = table(&PopPreset { ordinates: n, element: Element::F64, ..PopPreset::default() });
         let sum: f64 = t.solid_angles().iter().sum();
         assert!((sum / (4.0 * PI) - 1.0).abs() < 1e-9, "N = {n}: {sum}");
-        assert!(t.ordinates().iter().all(|d| (dot(*d, *d) - 1.0).abs() < 1e-15));
+        assert!(t.ordinates().iter().all(|&d| (DVec3::from_array(d).length_squared() - 1.0).abs() < 1e-15));
     }
 }
 
@@ -82,8 +83,7 @@ fn fibonacci_two_points_give_hemisphere_cells_about_their_bisector() {
     // c = (d0 − d1)/|d0 − d1|, whose mean direction is c/2, so a_0 = d0·c/2 = |d0 − d1|/4.
     let d = fibonacci_directions(2);
     assert!((d[0][2] - 0.5).abs() < 1e-15 && (d[1][2] + 0.5).abs() < 1e-15);
-    let diff = [d[0][0] - d[1][0], d[0][1] - d[1][1], d[0][2] - d[1][2]];
-    let expect = dot(diff, diff).sqrt() / 4.0;
+    let expect = (DVec3::from_array(d[0]) - DVec3::from_array(d[1])).length() / 4.0;
     let t = table(&PopPreset { ordinates: 2, element: Element::F64, ..PopPreset::default() });
     for (omega, a) in t.solid_angles().iter().zip(t.mean_cosines()) {
         assert!((omega / (2.0 * PI) - 1.0).abs() < 1e-4, "{:?}", t.solid_angles());
@@ -125,9 +125,10 @@ fn sweep_search_agrees_with_brute_force() {
             let z = 1.0 - 2.0 * stream.uniform(k, 0);
             let phi = 2.0 * PI * stream.uniform(k, 1);
             let r = (1.0 - z * z).max(0.0).sqrt();
-            let w = [r * phi.cos(), r * phi.sin(), z];
-            let brute = (0..n).max_by(|&a, &b| dot(dirs[a], w).total_cmp(&dot(dirs[b], w)).then(b.cmp(&a))).unwrap();
-            assert_eq!(s.nearest(w).unwrap().0, brute, "N = {n}, sample {k}");
+            let w = DVec3::new(r * phi.cos(), r * phi.sin(), z);
+            let dot = |a: usize| DVec3::from_array(dirs[a]).dot(w);
+            let brute = (0..n).max_by(|&a, &b| dot(a).total_cmp(&dot(b)).then(b.cmp(&a))).unwrap();
+            assert_eq!(s.nearest(w.to_array()).unwrap().0, brute, "N = {n}, sample {k}");
         }
     }
 }

@@ -35,6 +35,8 @@
 
 use std::path::Path;
 
+use glam::DVec3;
+
 use super::{EmitterProfile, TAIL_ALBEDOS, ZhResponse, ZhResponseRaw};
 use crate::container::{ArrayDesc, ArrayValues};
 use crate::physics::sh;
@@ -131,21 +133,20 @@ fn check_medium(medium: &Medium) -> Result<(f64, f64), QueryError> {
     Ok((sigma_s, sigma_a))
 }
 
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn unit(name: &str, v: [f64; 3]) -> Result<[f64; 3], QueryError> {
-    let len = dot(v, v).sqrt();
-    if v.iter().all(|c| c.is_finite()) && len > 0.0 && len.is_finite() {
-        Ok(v.map(|c| c / len))
+/// `v / |v|` for a finite non-zero `v`, else an error naming `name`.
+fn unit(name: &str, v: [f64; 3]) -> Result<DVec3, QueryError> {
+    let u = DVec3::from_array(v);
+    let len = u.length();
+    if u.is_finite() && len > 0.0 && len.is_finite() {
+        Ok(u / len)
     } else {
         Err(invalid(format!("{name} = {v:?} must be a finite non-zero vector")))
     }
 }
 
-fn finite3(name: &str, v: [f64; 3]) -> Result<[f64; 3], QueryError> {
-    if v.iter().all(|c| c.is_finite()) { Ok(v) } else { Err(invalid(format!("{name} = {v:?} must be finite"))) }
+fn finite3(name: &str, v: [f64; 3]) -> Result<DVec3, QueryError> {
+    let u = DVec3::from_array(v);
+    if u.is_finite() { Ok(u) } else { Err(invalid(format!("{name} = {v:?} must be finite"))) }
 }
 
 impl ZhResponseTable {
@@ -512,7 +513,7 @@ impl ZhResponseTable {
         receiver: &Receiver,
         opts: &QueryOptions,
         (single, multiple, tail): (&mut [f64], &mut [f64], &mut [f64; 2]),
-    ) -> Result<(f64, [f64; 3], [f64; 3]), QueryError> {
+    ) -> Result<(f64, DVec3, DVec3), QueryError> {
         let (sigma_s, sigma_a) = check_medium(medium)?;
         let x = finite3("receiver position", receiver.position)?;
         let n = unit("receiver normal", receiver.normal)?;
@@ -528,22 +529,21 @@ impl ZhResponseTable {
             Emitter::Point { intensity, position } => {
                 let intensity = finite_non_negative("intensity", intensity)?;
                 let p = finite3("emitter position", position)?;
-                let s = [p[0] - x[0], p[1] - x[1], p[2] - x[2]];
-                let d = dot(s, s).sqrt();
+                let s = p - x;
+                let d = s.length();
                 if d == 0.0 {
                     return Err(invalid(
                         "the receiver is at the point light: the irradiance is infinite; move it off the light".into(),
                     ));
                 }
-                let a = s.map(|c| c / d);
-                let direct = intensity * (-sigma_t * d).exp() * dot(n, a).max(0.0) / (d * d);
+                let a = s / d;
+                let direct = intensity * (-sigma_t * d).exp() * n.dot(a).max(0.0) / (d * d);
                 // Never more than half the way to the light: d_s ≥ d/2, so a receiver inside the shift
                 // distance gets at most twice its unshifted 1/d (continuous in d, no singularity).
                 let shift = shift.min(0.5 * d);
-                let xs = [x[0] + shift * n[0], x[1] + shift * n[1], x[2] + shift * n[2]];
-                let s2 = [p[0] - xs[0], p[1] - xs[1], p[2] - xs[2]];
-                let d2 = dot(s2, s2).sqrt();
-                let (d_s, axis) = if d2 > 0.0 { (d2, s2.map(|c| c / d2)) } else { (d, a) };
+                let s2 = p - (x + shift * n);
+                let d2 = s2.length();
+                let (d_s, axis) = if d2 > 0.0 { (d2, s2 / d2) } else { (d, a) };
                 (direct, intensity * sigma_t * sigma_t, d_s, axis)
             }
             Emitter::Area { .. } => return Err(invalid("internal: area emitters take the area path".into())),
@@ -551,8 +551,8 @@ impl ZhResponseTable {
                 let e0 = finite_non_negative("irradiance", irradiance)?;
                 let a = unit("toward_light", toward_light)?;
                 let depth = finite_non_negative("depth", depth)?;
-                let direct = e0 * (-sigma_t * depth).exp() * dot(n, a).max(0.0);
-                (direct, e0, (depth - shift * dot(n, a)).max(0.0), a)
+                let direct = e0 * (-sigma_t * depth).exp() * n.dot(a).max(0.0);
+                (direct, e0, (depth - shift * n.dot(a)).max(0.0), a)
             }
         };
         if !direct.is_finite() {
@@ -615,14 +615,14 @@ impl ZhResponseTable {
         if !self.emitters.contains(&EmitterProfile::Area) {
             return Err(QueryError::NotLoaded(format!("the table has no Area responses ({:?})", self.emitters)));
         }
-        let s = [p[0] - x[0], p[1] - x[1], p[2] - x[2]];
-        let d = dot(s, s).sqrt();
+        let s = p - x;
+        let d = s.length();
         if d == 0.0 {
             return Err(invalid("the receiver is at the area emitter: the irradiance is infinite; move it off".into()));
         }
-        let a = s.map(|c| c / d);
+        let a = s / d;
         let sigma_t = sigma_s + sigma_a;
-        let direct = intensity * (-dot(ne, a)).max(0.0) * (-sigma_t * d).exp() * dot(n, a).max(0.0) / (d * d);
+        let direct = intensity * (-ne.dot(a)).max(0.0) * (-sigma_t * d).exp() * n.dot(a).max(0.0) / (d * d);
         if !direct.is_finite() {
             return Err(invalid(format!("the direct irradiance overflowed ({direct}); check the emitter strength")));
         }
@@ -631,28 +631,26 @@ impl ZhResponseTable {
             return Ok(direct);
         }
         let shift = if opts.backscatter { (self.backscatter_shift / sigma_t).min(0.5 * d) } else { 0.0 };
-        let xs = [x[0] + shift * n[0], x[1] + shift * n[1], x[2] + shift * n[2]];
-        let s2 = [p[0] - xs[0], p[1] - xs[1], p[2] - xs[2]];
-        let d2 = dot(s2, s2).sqrt();
-        let (d_s, a_s) = if d2 > 0.0 { (d2, s2.map(|c| c / d2)) } else { (d, a) };
-        let cos_theta = (-dot(ne, a_s)).clamp(-1.0, 1.0);
+        let s2 = p - (x + shift * n);
+        let d2 = s2.length();
+        let (d_s, a_s) = if d2 > 0.0 { (d2, s2 / d2) } else { (d, a) };
+        let cos_theta = (-ne.dot(a_s)).clamp(-1.0, 1.0);
         let theta = cos_theta.acos();
         // Tangential direction of the patch normal (any perpendicular when the normal is along the axis).
-        let t = [ne[0] + cos_theta * a_s[0], ne[1] + cos_theta * a_s[1], ne[2] + cos_theta * a_s[2]];
-        let tl = dot(t, t).sqrt();
+        let t = ne + cos_theta * a_s;
+        let tl = t.length();
         let e = if tl > 1e-12 {
-            t.map(|c| c / tl)
+            t / tl
         } else {
-            let helper = if a_s[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
-            let c = dot(helper, a_s);
-            let v = [helper[0] - c * a_s[0], helper[1] - c * a_s[1], helper[2] - c * a_s[2]];
-            let l = dot(v, v).sqrt();
-            v.map(|c| c / l)
+            let helper = if a_s.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+            let v = helper - helper.dot(a_s) * a_s;
+            v / v.length()
         };
+        // The stored axis (x: toward `e`, z: along `a_s`) in world space, as the SH code takes it.
         let world = |ax: [f64; 3]| {
-            let w = [ax[0] * e[0] + ax[2] * a_s[0], ax[0] * e[1] + ax[2] * a_s[1], ax[0] * e[2] + ax[2] * a_s[2]];
-            let l = dot(w, w).sqrt();
-            if l > 0.0 { w.map(|c| c / l) } else { a_s }
+            let w = ax[0] * e + ax[2] * a_s;
+            let l = w.length();
+            (if l > 0.0 { w / l } else { a_s }).to_array()
         };
         let mut run = |g: f64, s_eff: f64, orders: std::ops::RangeInclusive<usize>| -> Result<(), QueryError> {
             let t_eff = s_eff + sigma_a;
@@ -707,7 +705,7 @@ impl ZhResponseTable {
         let mut multiple = [0.0; super::MAX_ORDER as usize];
         let (single, multiple) = (&mut single[..self.order], &mut multiple[..self.order]);
         if let Emitter::Area { .. } = emitter {
-            let n = unit("receiver normal", receiver.normal)?;
+            let n = unit("receiver normal", receiver.normal)?.to_array();
             let (mut single, mut multiple) = (0.0, 0.0);
             let direct = self.area_lobes(medium, emitter, receiver, opts, &mut |b, lobe, axis| {
                 let e = sh::zh_irradiance(lobe, axis, n);
@@ -722,7 +720,7 @@ impl ZhResponseTable {
         }
         let mut tail = [0.0; 2];
         let (direct, axis, n) = self.lobes(medium, emitter, receiver, opts, (single, multiple, &mut tail))?;
-        let cos = dot(axis, n).clamp(-1.0, 1.0);
+        let cos = axis.dot(n).clamp(-1.0, 1.0);
         let (single, multiple) = self.shade_pair(single, multiple, cos);
         let (single, multiple) = (single.max(0.0), multiple.max(0.0));
         let tail = if self.shading.len() >= 2 {
@@ -769,6 +767,7 @@ impl ZhResponseTable {
         let mut multiple = vec![0.0; self.order];
         let mut tail = [0.0; 2];
         let (_, axis, _) = self.lobes(medium, emitter, receiver, opts, (&mut single, &mut multiple, &mut tail))?;
+        let axis = axis.to_array();
         let mut zh: Vec<f64> = single.iter().zip(&multiple).map(|(a, b)| a + b).collect();
         for (z, t) in zh.iter_mut().zip(tail) {
             *z += t;
