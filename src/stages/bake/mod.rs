@@ -19,38 +19,12 @@
 
 pub mod atlas;
 pub mod lights;
+mod probes;
 pub mod report;
+mod tiles;
 pub mod transport;
 
-impl super::Stage for BakeLightmaps {
-    fn kind(&self) -> &'static str {
-        BakeLightmapsRaw::KIND
-    }
-    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
-        let kind = crate::tables::zh_response::ZhResponseRaw::KIND;
-        self.table_ref().map(|t| ("table", t.to_string(), kind)).into_iter().collect()
-    }
-    fn validate(&self) -> Vec<FieldIssue> {
-        BakeLightmaps::validate(self)
-    }
-    fn scenes(&self, base_dir: &Path) -> Vec<PathBuf> {
-        vec![self.scene_path(base_dir)]
-    }
-    fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
-        BakeLightmaps::run(self, id, ctx)
-    }
-    fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<Option<String>, StageError> {
-        let r = BakeLightmaps::report(self, id, ctx, report_dir, &report::LadderOptions::default())?;
-        Ok(Some(report::markdown(&r)))
-    }
-    fn bench_focus(&self) -> Option<super::BenchFocus> {
-        Some(super::BenchFocus::Bake)
-    }
-    /// The bake's rows say it all: its text is empty.
-    fn bench(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<super::BenchRow>)>, StageError> {
-        BakeLightmaps::bench(self, id, ctx).map(|rows| Some((String::new(), rows)))
-    }
-}
+pub use tiles::{TILE_TEXELS, TileBaker};
 
 #[cfg(test)]
 mod tests;
@@ -686,64 +660,6 @@ impl BakeLightmaps {
             message: format!("{e} (the scene's media have g = {gs:?})"),
         })
     }
-
-    /// Bakes the probe grid (if any) into `probes.vtab`; returns the number of probes.
-    fn bake_probes(
-        &self,
-        id: &str,
-        scene: &Scene,
-        bvh: &SceneBvh,
-        table: Option<&ZhResponseTable>,
-        dir: &Path,
-        outputs: &mut Vec<PathBuf>,
-    ) -> Result<usize, StageError> {
-        let [nx, ny, nz] = match self.probe_grid.as_slice() {
-            [a, b, c] => [*a, *b, *c],
-            _ => return Ok(0),
-        };
-        let Some((lo, hi)) = scene.bounds() else { return Ok(0) };
-        let mode = *self.modes.last().unwrap_or(&BakeMode::Full);
-        let tr = Transport::new(scene, bvh, table, self.transport_options(mode)).map_err(|e| StageError::Input {
-            stage: id.into(),
-            message: e.to_string(),
-            help: "check the table".into(),
-        })?;
-        let counts = [nx, ny, nz];
-        let mut positions = Vec::new();
-        for k in 0..nz {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let idx = [i, j, k];
-                    positions.push(
-                        [0, 1, 2].map(|c| lo[c] + (hi[c] - lo[c]) * (f64::from(idx[c]) + 0.5) / f64::from(counts[c])),
-                    );
-                }
-            }
-        }
-        let sh: Vec<[[f64; transport::PROBE_SH]; 3]> = positions
-            .par_iter()
-            .enumerate()
-            .map(|(i, p)| tr.probe(*p, (1 << 40) + i as u64))
-            .collect::<Result<_, _>>()
-            .map_err(|e| StageError::Input {
-                stage: id.into(),
-                message: e.to_string(),
-                help: "check the table".into(),
-            })?;
-        let path = dir.join("probes.vtab");
-        let bytes = probe_container(&positions, &sh, &format!("{self:?}")).map_err(|e| StageError::Output {
-            stage: id.into(),
-            path: path.clone(),
-            message: e,
-        })?;
-        crate::cache::write_atomic(&path, &bytes).map_err(|e| StageError::Output {
-            stage: id.into(),
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
-        outputs.push(path);
-        Ok(positions.len())
-    }
 }
 
 /// What every use of a bake stage (run, report, bench) starts from.
@@ -806,89 +722,35 @@ pub fn bake_points(
     Ok(out?.into_iter().flatten().collect())
 }
 
-/// Probes as a `.vtab` container: `positions[n, 3]` \[m\] and `sh[n, 3, 9]` (channel, coefficient) \[W/(m²·sr)\].
-fn probe_container(
-    positions: &[[f64; 3]],
-    sh: &[[[f64; transport::PROBE_SH]; 3]],
-    definition: &str,
-) -> Result<Vec<u8>, String> {
-    use crate::container::{ArrayDesc, ArrayValues, Axis, ElementType, Header};
-    let n = positions.len() as u64;
-    let arrays = vec![
-        ArrayDesc {
-            name: "positions".into(),
-            description: "probe positions (world space)".into(),
-            unit: "m".into(),
-            element: ElementType::F32,
-            axes: vec![Axis::linear("probe", "", 0.0, (n.max(1) - 1) as f64, n), Axis::linear("xyz", "", 0.0, 2.0, 3)],
-            quantization: None,
-        },
-        ArrayDesc {
-            name: "sh".into(),
-            description: "incident radiance, real SH bands l <= 2 (i = l(l+1)+m), per RGB channel".into(),
-            unit: "W/(m^2 sr)".into(),
-            element: ElementType::F32,
-            axes: vec![
-                Axis::linear("probe", "", 0.0, (n.max(1) - 1) as f64, n),
-                Axis::linear("channel", "", 0.0, 2.0, 3),
-                Axis::linear("coefficient", "", 0.0, 8.0, transport::PROBE_SH as u64),
-            ],
-            quantization: None,
-        },
-    ];
-    let header = Header {
-        kind: "LightProbes".into(),
-        kind_schema_version: 1,
-        generator_version: "bake_lightmaps/1".into(),
-        definition_ron: definition.into(),
-        content_key: *blake3::hash(definition.as_bytes()).as_bytes(),
-        arrays,
-    };
-    let pos: Vec<f32> = positions.iter().flat_map(|p| p.map(|c| c as f32)).collect();
-    let coef: Vec<f32> = sh.iter().flat_map(|p| p.iter().flat_map(|c| c.map(|v| v as f32))).collect();
-    let values = vec![ArrayValues::F32(pos), ArrayValues::F32(coef)];
-    crate::container::encode(&header, &values, &crate::container::EncodeOptions::default())
-        .map(|e| e.bytes)
-        .map_err(|e| e.to_string())
-}
-
-/// A bake prepared for its tiles ([`BakeLightmaps::tile_baker`]).
-pub struct TileBaker<'a> {
-    stage: &'a BakeLightmaps,
-    id: String,
-    prepared: Prepared,
-}
-
-impl TileBaker<'_> {
-    /// Texels of the atlas.
-    pub fn texels(&self) -> usize {
-        self.prepared.points.len()
+impl super::Stage for BakeLightmaps {
+    fn kind(&self) -> &'static str {
+        BakeLightmapsRaw::KIND
     }
-
-    /// The estimates of tile `tile` (texels `tile × TILE_TEXELS …`, in atlas order) of mode
-    /// `modes[mode]`: a work unit of a farm bake. Every texel draws from its own stream (keyed by its
-    /// atlas pixel), so the tiles of all texels are the bake's estimates to the bit.
-    pub fn bake(&self, mode: usize, tile: usize) -> Result<Vec<transport::Estimate>, StageError> {
-        let fail =
-            |message: String, help: &str| StageError::Input { stage: self.id.clone(), message, help: help.into() };
-        let Some(&m) = self.stage.modes.get(mode) else {
-            return Err(fail(
-                format!("mode {mode} out of range ({} modes)", self.stage.modes.len()),
-                "report this bug",
-            ));
-        };
-        let p = &self.prepared;
-        let start = tile.saturating_mul(TILE_TEXELS).min(p.points.len());
-        let end = (start + TILE_TEXELS).min(p.points.len());
-        let tr = Transport::new(&p.scene, &p.bvh, p.table.as_ref(), self.stage.transport_options(m))
-            .map_err(|e| fail(e.to_string(), "check the table"))?;
-        bake_points(&tr, &p.points[start..end], false, "")
-            .map_err(|e| fail(e.to_string(), "check the table's g range against the scene's media"))
+    fn table_refs(&self) -> Vec<(&'static str, String, &'static str)> {
+        let kind = crate::tables::zh_response::ZhResponseRaw::KIND;
+        self.table_ref().map(|t| ("table", t.to_string(), kind)).into_iter().collect()
+    }
+    fn validate(&self) -> Vec<FieldIssue> {
+        BakeLightmaps::validate(self)
+    }
+    fn scenes(&self, base_dir: &Path) -> Vec<PathBuf> {
+        vec![self.scene_path(base_dir)]
+    }
+    fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
+        BakeLightmaps::run(self, id, ctx)
+    }
+    fn report(&self, id: &str, ctx: &StageContext, report_dir: &Path) -> Result<Option<String>, StageError> {
+        let r = BakeLightmaps::report(self, id, ctx, report_dir, &report::LadderOptions::default())?;
+        Ok(Some(report::markdown(&r)))
+    }
+    fn bench_focus(&self) -> Option<super::BenchFocus> {
+        Some(super::BenchFocus::Bake)
+    }
+    /// The bake's rows say it all: its text is empty.
+    fn bench(&self, id: &str, ctx: &StageContext) -> Result<Option<(String, Vec<super::BenchRow>)>, StageError> {
+        BakeLightmaps::bench(self, id, ctx).map(|rows| Some((String::new(), rows)))
     }
 }
-
-/// Texels per work unit of a farm bake (`voltab run --shard`).
-pub const TILE_TEXELS: usize = 1024;
 
 fn ms(t0: Instant) -> f64 {
     t0.elapsed().as_secs_f64() * 1e3
