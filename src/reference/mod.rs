@@ -4,6 +4,7 @@
 //! table generator.
 
 pub mod beam_adjoint;
+pub mod frame;
 pub mod grid_mc;
 pub mod hg_hp;
 pub mod mitsuba;

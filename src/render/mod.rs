@@ -10,6 +10,7 @@
 //! - [`dielectric`]: a medium inside a smooth dielectric boundary, spherical emitters and the setup the
 //!   translucent renderer and its reference read.
 //! - [`environment`]: latitude–longitude environment maps, their sampling, the dome and the bundled sky.
+//! - [`frame`]: the methods' orthonormal frame (Duff et al. 2017).
 //! - [`voxel`]: voxel media and directional lights (POP and its grid Monte-Carlo reference).
 //! - [`occluder`]: opaque geometry as a segment/ray blocking query (POP and its reference).
 //! - [`optics`]: Fresnel reflectance, refraction, reflection at smooth dielectric interfaces (one home).
@@ -22,6 +23,7 @@
 pub mod color;
 pub mod dielectric;
 pub mod environment;
+pub mod frame;
 pub mod gbuffer;
 pub mod gpu;
 pub mod occluder;

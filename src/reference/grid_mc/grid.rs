@@ -3,6 +3,7 @@
 
 use glam::DVec3;
 
+use crate::reference::frame::frame;
 use crate::render::voxel::VoxelMedium;
 
 /// A uniform grid of `dims` cells of size `size` from `min` (voxels or tally cells).
@@ -166,14 +167,6 @@ impl<'a> Voxels<'a> {
         });
         hit
     }
-}
-
-/// A unit vector's orthonormal complement (Duff et al. 2017).
-pub(super) fn frame(n: DVec3) -> (DVec3, DVec3) {
-    let sign = 1.0f64.copysign(n.z);
-    let a = -1.0 / (sign + n.z);
-    let b = n.x * n.y * a;
-    (DVec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), DVec3::new(b, sign + n.y * n.y * a, -n.y))
 }
 
 /// The direction at cosine `mu` and azimuth `2π·u` about the unit vector `d`.

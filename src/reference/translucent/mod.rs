@@ -83,6 +83,7 @@ use rayon::prelude::*;
 
 use crate::physics::hg;
 use crate::physics::rng::{Draws, StreamKey};
+use crate::reference::frame::frame;
 use crate::render::ViewCamera;
 use crate::render::dielectric::{Emitter, Material, Setup};
 use crate::render::optics::{fresnel, reflect, refract};
@@ -299,14 +300,6 @@ struct Tracer<'a> {
 /// Self-intersection guard \[m\] at point `p`.
 fn eps(p: DVec3) -> f64 {
     1e-6 * p.abs().max_element().max(1.0)
-}
-
-/// An orthonormal frame `(t, b)` completing the unit vector `n` (Duff et al. 2017).
-fn frame(n: DVec3) -> (DVec3, DVec3) {
-    let s = 1f64.copysign(n.z);
-    let a = -1.0 / (s + n.z);
-    let b = n.x * n.y * a;
-    (DVec3::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x), DVec3::new(b, s + n.y * n.y * a, -n.y))
 }
 
 /// The unit direction with cosine `mu` to the unit `axis` and azimuth `phi`.

@@ -18,6 +18,7 @@
 
 use glam::DVec3;
 
+use crate::reference::frame::frame;
 use crate::scene::{LightKind, Scene};
 
 /// Smallest distance a point light's `1/d²` is evaluated at \[m\].
@@ -69,15 +70,6 @@ pub fn unit(v: [f64; 3]) -> Option<DVec3> {
     }
     let s = v / m;
     Some(s / s.length())
-}
-
-/// Two unit vectors completing `n` to a right-handed orthonormal frame (continuous except where
-/// `n.z` changes sign; Duff et al. 2017's branchless construction, written out).
-pub fn frame(n: DVec3) -> (DVec3, DVec3) {
-    let sign = 1.0f64.copysign(n.z);
-    let a = -1.0 / (sign + n.z);
-    let b = n.x * n.y * a;
-    (DVec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), DVec3::new(b, sign + n.y * n.y * a, -n.y))
 }
 
 impl PreparedLight {

@@ -58,9 +58,10 @@ use glam::DVec3;
 
 use super::VolPathOptions;
 use super::flight::{self, Flight};
-use super::lights::{self, LightSample, PreparedLight};
+use super::lights::{LightSample, PreparedLight};
 use crate::physics::hg;
 use crate::physics::rng::{Draws, SampleStream};
+use crate::reference::frame::frame;
 use crate::render::optics::fresnel_cos;
 use crate::scene::Scene;
 use crate::scene::bvh::{Hit, MediumSegment, Ray, SceneBvh, SurfaceResponse as SurfaceKind};
@@ -307,7 +308,7 @@ impl<'a> Context<'a> {
                 // The given ray: probability 1 for every channel, and no light sample can produce it.
                 Vertex::Camera { o, d } => (o, d, f64::INFINITY),
                 Vertex::Surface { o, n, k, .. } => {
-                    let (t1, t2) = lights::frame(n);
+                    let (t1, t2) = frame(n);
                     let r = u1.sqrt();
                     let phi = std::f64::consts::TAU * u2;
                     let cz = (1.0 - u1).max(0.0).sqrt();
@@ -317,7 +318,7 @@ impl<'a> Context<'a> {
                 }
                 Vertex::Medium { p, d_in, g, .. } => {
                     let mu = hg::sample_mu(u1, g[hero].clamp(-0.999_999, 0.999_999));
-                    let (t1, t2) = lights::frame(d_in);
+                    let (t1, t2) = frame(d_in);
                     let phi = std::f64::consts::TAU * u2;
                     let sin = (1.0 - mu * mu).max(0.0).sqrt();
                     let dir = (mu * d_in + sin * (phi.cos() * t1 + phi.sin() * t2)).normalize();

@@ -21,6 +21,7 @@
 use glam::DVec3;
 
 use crate::render::color::luminance;
+use crate::render::frame::frame;
 use crate::scene::{LightKind, Mesh, Scene};
 
 /// A point on an area light sampled by area: a differential patch.
@@ -286,15 +287,6 @@ fn triangles(m: &Mesh) -> (Vec<WorldTriangle>, Vec<f64>) {
         cdf.push(acc);
     }
     (tris, cdf)
-}
-
-/// An orthonormal pair perpendicular to the unit vector `n`.
-pub fn frame(n: DVec3) -> (DVec3, DVec3) {
-    // Duff et al. 2017, "Building an orthonormal basis, revisited".
-    let s = 1f64.copysign(n.z);
-    let a = -1.0 / (s + n.z);
-    let b = n.x * n.y * a;
-    (DVec3::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x), DVec3::new(b, s + n.y * n.y * a, -n.y))
 }
 
 /// `a / |a|`, or `None` for a zero or non-finite vector. (Not glam's `try_normalize`, which multiplies

@@ -38,8 +38,9 @@
 use glam::DVec3;
 
 use super::BakeMode;
-use super::lights::{BakeLights, Patch, Source, frame, unit};
+use super::lights::{BakeLights, Patch, Source, unit};
 use crate::physics::rng::{SampleStream, StreamKey};
+use crate::render::frame::frame;
 use crate::scene::bvh::{Hit, Ray, SceneBvh, optical_thickness};
 use crate::scene::{Boundary, Scene, Surface};
 use crate::tables::zh_response::{Emitter, Medium as ZhMedium, QueryError, QueryOptions, Receiver, ZhResponseTable};

@@ -67,16 +67,6 @@ pub struct Grid {
     pub link_decay: Vec<[Rgb; 3]>,
 }
 
-/// A frame with `d` as third axis (Duff et al.'s branchless orthonormal basis).
-fn frame(d: DVec3) -> [DVec3; 3] {
-    let sign = 1.0_f64.copysign(d.z);
-    let a = -1.0 / (sign + d.z);
-    let b = d.x * d.y * a;
-    let u = DVec3::new(1.0 + sign * d.x * d.x * a, sign * b, -sign * d.x);
-    let v = DVec3::new(b, sign + d.y * d.y * a, -d.y);
-    [u, v, d]
-}
-
 impl Grid {
     /// Builds the grid: `d` (unit, the way light travels), `dims` (lateral, lateral, along `d`).
     ///
@@ -87,7 +77,8 @@ impl Grid {
         if dims.contains(&0) {
             return Err(format!("propagation grid {dims:?} has a zero dimension; every axis needs ≥ 1 cell"));
         }
-        let axes = frame(d);
+        let (u, v) = crate::render::frame::frame(d);
+        let axes = [u, v, d];
         // The oriented box enclosing the medium box's corners.
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
