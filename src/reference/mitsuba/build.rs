@@ -1,7 +1,9 @@
 //! [`Scene`] → Mitsuba XML elements, binary files and the manifest, all in memory (the mapping is in the
 //! module doc of [`super`]).
 
-use super::geometry::{self as geo, V3};
+use glam::DVec3;
+
+use super::geometry as geo;
 use super::xml::Element;
 use super::{
     CameraEntry, ExportError, ExportOptions, ExportWarning, GRID_MAX_CELLS, GRID_TOLERANCE, GlobalRegion, GridEntry,
@@ -31,13 +33,14 @@ struct Builder<'a> {
     root: Element,
     files: Vec<(String, Vec<u8>)>,
     m: Manifest,
-    global_box: Option<(V3, V3)>,
+    global_box: Option<(DVec3, DVec3)>,
 }
 
 /// Builds the export of `scene`.
 pub fn build(scene: &Scene, options: &ExportOptions) -> Result<Built, ExportError> {
     let global = scene.media.iter().position(|m| m.boundary == Boundary::Global);
-    let global_box = global.and_then(|_| scene.global_medium_bounds());
+    let global_box =
+        global.and_then(|_| scene.global_medium_bounds()).map(|(lo, hi)| (DVec3::from(lo), DVec3::from(hi)));
     let units = [
         ("length", "metre; world space, right-handed, +Y up (voltab's frame, unchanged)"),
         ("point, spot", "intensity [W/sr] → Mitsuba point/spot `intensity`"),
@@ -99,7 +102,7 @@ impl Builder<'_> {
     }
 
     /// The Mitsuba id of the medium around `p` (see [`geo::medium_at`]).
-    fn medium_around(&self, p: V3, exclude: Option<usize>) -> Option<String> {
+    fn medium_around(&self, p: DVec3, exclude: Option<usize>) -> Option<String> {
         geo::medium_at(self.scene, p, exclude, self.global_box).map(medium_id)
     }
 
@@ -126,8 +129,8 @@ impl Builder<'_> {
         let width = options.width.max(1);
         let height =
             options.height.unwrap_or_else(|| (f64::from(width) / aspect.unwrap_or(4.0 / 3.0)).round().max(1.0) as u32);
-        let f = |v: V3| format!("{}, {}, {}", super::xml::num(v[0]), super::xml::num(v[1]), super::xml::num(v[2]));
-        let target = geo::add(cam.position, cam.forward);
+        let f = |v: DVec3| format!("{}, {}, {}", super::xml::num(v.x), super::xml::num(v.y), super::xml::num(v.z));
+        let target = DVec3::from(cam.position) + DVec3::from(cam.forward);
         let diag = self.scene.diagonal().max(1.0);
         let mut sensor = Element::new("sensor")
             .attr("type", "perspective")
@@ -136,9 +139,14 @@ impl Builder<'_> {
             .child(Element::string("fov_axis", "y"))
             .child(Element::float("near_clip", cam.znear.max(1e-6)))
             .child(Element::float("far_clip", cam.zfar.unwrap_or(1e4 * diag)))
-            .child(Element::new("transform").attr("name", "to_world").child(
-                Element::new("lookat").attr("origin", f(cam.position)).attr("target", f(target)).attr("up", f(cam.up)),
-            ))
+            .child(
+                Element::new("transform").attr("name", "to_world").child(
+                    Element::new("lookat")
+                        .attr("origin", f(DVec3::from(cam.position)))
+                        .attr("target", f(target))
+                        .attr("up", f(DVec3::from(cam.up))),
+                ),
+            )
             .child(
                 Element::new("sampler")
                     .attr("type", "independent")
@@ -152,7 +160,7 @@ impl Builder<'_> {
                     .child(Element::string("pixel_format", "rgb"))
                     .child(Element::new("rfilter").attr("type", "box")),
             );
-        let medium = self.medium_around(cam.position, None);
+        let medium = self.medium_around(DVec3::from(cam.position), None);
         if let Some(id) = &medium {
             sensor.push(Element::reference(Some("medium"), id));
         }
@@ -198,16 +206,16 @@ impl Builder<'_> {
                 }
                 (Density::ExponentialHeight { .. }, Some((lo, hi))) => {
                     let (grid, entry) = self.height_grid(i, med, lo, hi);
-                    let size = geo::sub(hi, lo);
+                    let size = hi - lo;
                     e = e.attr("type", "heterogeneous").child(
                         Element::new("volume")
                             .attr("name", "sigma_t")
                             .attr("type", "gridvolume")
                             .child(Element::string("filename", &entry.file))
                             .child(Element::to_world_matrix(geo::affine(
-                                [size[0], 0.0, 0.0],
-                                [0.0, size[1], 0.0],
-                                [0.0, 0.0, size[2]],
+                                DVec3::new(size.x, 0.0, 0.0),
+                                DVec3::new(0.0, size.y, 0.0),
+                                DVec3::new(0.0, 0.0, size.z),
                                 lo,
                             ))),
                     );
@@ -234,12 +242,12 @@ impl Builder<'_> {
 
     /// A 3-channel σ_t·ρ grid over `[lo, hi]`, resolved along each axis in proportion to how fast the
     /// exponential changes along it.
-    fn height_grid(&mut self, i: usize, med: &Medium, lo: V3, hi: V3) -> (vol::Grid, GridEntry) {
+    fn height_grid(&mut self, i: usize, med: &Medium, lo: DVec3, hi: DVec3) -> (vol::Grid, GridEntry) {
         let Density::ExponentialHeight { rho, falloff, direction, offset } = med.density else {
             unreachable!("height_grid is called for exponential densities only")
         };
-        let n = geo::unit(direction).unwrap_or([0.0, 1.0, 0.0]);
-        let size = geo::sub(hi, lo);
+        let n = geo::unit(DVec3::from(direction)).unwrap_or(DVec3::Y);
+        let size = hi - lo;
         let mut res =
             [0, 1, 2].map(|k| ((falloff.abs() * n[k].abs() * size[k] / GRID_TOLERANCE).ceil() as usize).clamp(2, 4096));
         while res.iter().product::<usize>() > GRID_MAX_CELLS {
@@ -256,27 +264,32 @@ impl Builder<'_> {
             );
         }
         let t = med.sigma_t();
-        let grid = vol::sample_cell_centres((lo, hi), res, 3, |p| {
-            let h = geo::dot(geo::sub(p, offset), n);
+        let grid = vol::sample_cell_centres((lo.to_array(), hi.to_array()), res, 3, |p| {
+            let h = (DVec3::from(p) - DVec3::from(offset)).dot(n);
             let d = rho * (-falloff * h).exp();
             t.iter().map(|s| s * d).collect()
         });
         let entry = GridEntry {
             file: format!("volumes/medium_{i}.vol"),
             resolution: res,
-            min: lo,
-            max: hi,
+            min: lo.to_array(),
+            max: hi.to_array(),
             max_relative_interpolation_error: err,
         };
         (grid, entry)
     }
 
-    fn global_region(&mut self, g: usize, lo: V3, hi: V3) {
+    fn global_region(&mut self, g: usize, lo: DVec3, hi: DVec3) {
         let id = medium_id(g);
-        let size = geo::sub(hi, lo);
-        let centre = geo::scale(geo::add(lo, hi), 0.5);
+        let size = hi - lo;
+        let centre = (lo + hi) * 0.5;
         // Mitsuba's cube spans [−1, 1]³.
-        let m = geo::affine([size[0] / 2.0, 0.0, 0.0], [0.0, size[1] / 2.0, 0.0], [0.0, 0.0, size[2] / 2.0], centre);
+        let m = geo::affine(
+            DVec3::new(size.x / 2.0, 0.0, 0.0),
+            DVec3::new(0.0, size.y / 2.0, 0.0),
+            DVec3::new(0.0, 0.0, size.z / 2.0),
+            centre,
+        );
         self.root.push(
             Element::new("shape")
                 .attr("type", "cube")
@@ -299,8 +312,8 @@ impl Builder<'_> {
         self.m.global_medium = Some(GlobalRegion {
             medium: g,
             id,
-            min: lo,
-            max: hi,
+            min: lo.to_array(),
+            max: hi.to_array(),
             model: "the scene bounds (mesh vertices and positioned lights) padded on each side by 1 % of their \
                     diagonal + 1 mm; vacuum outside"
                 .into(),
@@ -357,7 +370,10 @@ impl Builder<'_> {
             let exterior = if kind == "diffuse" {
                 None
             } else {
-                self.medium_around(mesh.positions[mesh.triangles[0][0] as usize].map(f64::from), Some(i))
+                self.medium_around(
+                    DVec3::from_array(mesh.positions[mesh.triangles[0][0] as usize].map(f64::from)),
+                    Some(i),
+                )
             };
             if let Some(m) = &interior {
                 e.push(Element::reference(Some("interior"), m));
@@ -401,7 +417,7 @@ impl Builder<'_> {
                     ),
                 ),
                 LightKind::Spot { position, direction, inner_cone, outer_cone } => {
-                    let Some(axis) = geo::unit(*direction) else {
+                    let Some(axis) = geo::unit(DVec3::from(*direction)) else {
                         self.warn(&light.name, "spot light without a direction: left out");
                         continue;
                     };
@@ -419,8 +435,8 @@ impl Builder<'_> {
                             ),
                         );
                     }
-                    let f = |v: V3| {
-                        format!("{}, {}, {}", super::xml::num(v[0]), super::xml::num(v[1]), super::xml::num(v[2]))
+                    let f = |v: DVec3| {
+                        format!("{}, {}, {}", super::xml::num(v.x), super::xml::num(v.y), super::xml::num(v.z))
                     };
                     (
                         "spot",
@@ -431,8 +447,8 @@ impl Builder<'_> {
                                 .child(
                                     Element::new("transform").attr("name", "to_world").child(
                                         Element::new("lookat")
-                                            .attr("origin", f(*position))
-                                            .attr("target", f(geo::add(*position, axis)))
+                                            .attr("origin", f(DVec3::from(*position)))
+                                            .attr("target", f(DVec3::from(*position) + axis))
                                             .attr("up", f(up)),
                                     ),
                                 )
@@ -443,7 +459,7 @@ impl Builder<'_> {
                     )
                 }
                 LightKind::Directional { direction, angle } => {
-                    let Some(d) = geo::unit(*direction) else {
+                    let Some(d) = geo::unit(DVec3::from(*direction)) else {
                         self.warn(&light.name, "directional light without a direction: left out");
                         continue;
                     };
@@ -459,25 +475,23 @@ impl Builder<'_> {
                         Some(
                             Element::new("emitter")
                                 .attr("type", "directional")
-                                .child(Element::xyz("vector", "direction", d))
+                                .child(Element::xyz("vector", "direction", d.to_array()))
                                 .child(Element::rgb("irradiance", rgb)),
                         ),
                     )
                 }
                 LightKind::Rect { center, half_u, half_v, normal } => {
-                    let Some(n) = geo::unit(*normal) else { continue };
-                    let (u, v) = if geo::dot(geo::cross(*half_u, *half_v), n) < 0.0 {
-                        (*half_v, *half_u)
-                    } else {
-                        (*half_u, *half_v)
-                    };
+                    let Some(n) = geo::unit(DVec3::from(*normal)) else { continue };
+                    let (hu, hv) = (DVec3::from(*half_u), DVec3::from(*half_v));
+                    let (u, v) = if hu.cross(hv).dot(n) < 0.0 { (hv, hu) } else { (hu, hv) };
                     // Mitsuba's rectangle spans [−1, 1]² in local xy with normal +z.
-                    ("rect", "rectangle", Some(area_shape("rectangle", i, geo::affine(u, v, n, *center), rgb)))
+                    let m = geo::affine(u, v, n, DVec3::from(*center));
+                    ("rect", "rectangle", Some(area_shape("rectangle", i, m, rgb)))
                 }
                 LightKind::Disk { center, normal, radius } => {
-                    let Some(n) = geo::unit(*normal) else { continue };
+                    let Some(n) = geo::unit(DVec3::from(*normal)) else { continue };
                     let (t, b) = geo::frame(n);
-                    let m = geo::affine(geo::scale(t, *radius), geo::scale(b, *radius), n, *center);
+                    let m = geo::affine(t * *radius, b * *radius, n, DVec3::from(*center));
                     ("disk", "disk", Some(area_shape("disk", i, m, rgb)))
                 }
                 LightKind::Sphere { center, radius } => {
@@ -520,7 +534,12 @@ impl Builder<'_> {
                     .attr("type", "envmap")
                     .child(Element::string("filename", &tex.to_string_lossy()))
                     .child(Element::float("scale", env.scale * grey))
-                    .child(Element::to_world_matrix(geo::affine(r[0], r[1], r[2], [0.0; 3])))
+                    .child(Element::to_world_matrix(geo::affine(
+                        DVec3::from(r[0]),
+                        DVec3::from(r[1]),
+                        DVec3::from(r[2]),
+                        DVec3::ZERO,
+                    )))
             }
         };
         self.root.push(e.comment(format!("environment {}", env.name)));
@@ -532,7 +551,7 @@ impl Builder<'_> {
     }
 }
 
-fn area_shape(kind: &str, i: usize, m: [[f64; 4]; 4], radiance: V3) -> Element {
+fn area_shape(kind: &str, i: usize, m: [[f64; 4]; 4], radiance: [f64; 3]) -> Element {
     Element::new("shape")
         .attr("type", kind)
         .attr("id", format!("light_{i}"))
@@ -541,18 +560,17 @@ fn area_shape(kind: &str, i: usize, m: [[f64; 4]; 4], radiance: V3) -> Element {
         .child(Element::new("emitter").attr("type", "area").child(Element::rgb("radiance", radiance)))
 }
 
-fn mesh_box(p: &[[f32; 3]]) -> Option<(V3, V3)> {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
+fn mesh_box(p: &[[f32; 3]]) -> Option<(DVec3, DVec3)> {
+    let mut lo = DVec3::INFINITY;
+    let mut hi = DVec3::NEG_INFINITY;
     for v in p {
-        for k in 0..3 {
-            lo[k] = lo[k].min(f64::from(v[k]));
-            hi[k] = hi[k].max(f64::from(v[k]));
-        }
+        let v = DVec3::from_array(v.map(f64::from));
+        lo = lo.min(v);
+        hi = hi.max(v);
     }
-    lo[0].is_finite().then(|| {
-        let pad = 1e-4 * geo::norm(geo::sub(hi, lo)) + 1e-6;
-        (lo.map(|x| x - pad), hi.map(|x| x + pad))
+    lo.x.is_finite().then(|| {
+        let pad = 1e-4 * (hi - lo).length() + 1e-6;
+        (lo - pad, hi + pad)
     })
 }
 

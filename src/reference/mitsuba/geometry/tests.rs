@@ -5,18 +5,17 @@ use crate::scene::fixtures;
 fn unit_cube_volume_and_containment() {
     let cube = fixtures::cube("c", 1.0);
     assert!((signed_volume(&cube) - 1.0).abs() < 1e-6, "{}", signed_volume(&cube));
-    assert!(contains(&cube, [0.5, 0.5, 0.5]));
-    assert!(contains(&cube, [0.01, 0.99, 0.5]));
-    assert!(!contains(&cube, [1.01, 0.5, 0.5]));
-    assert!(!contains(&cube, [-0.5, 0.5, 0.5]));
+    assert!(contains(&cube, DVec3::new(0.5, 0.5, 0.5)));
+    assert!(contains(&cube, DVec3::new(0.01, 0.99, 0.5)));
+    assert!(!contains(&cube, DVec3::new(1.01, 0.5, 0.5)));
+    assert!(!contains(&cube, DVec3::new(-0.5, 0.5, 0.5)));
 }
 
 #[test]
 fn frames_are_right_handed() {
-    for n in [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], unit([1.0, -2.0, 0.5]).unwrap()] {
+    for n in [DVec3::Z, DVec3::X, unit(DVec3::new(1.0, -2.0, 0.5)).unwrap()] {
         let (t, b) = frame(n);
-        let c = cross(t, b);
-        assert!((0..3).all(|k| (c[k] - n[k]).abs() < 1e-12), "{n:?}");
-        assert!(dot(t, n).abs() < 1e-12 && dot(b, n).abs() < 1e-12);
+        assert!((t.cross(b) - n).abs().max_element() < 1e-12, "{n:?}");
+        assert!(t.dot(n).abs() < 1e-12 && b.dot(n).abs() < 1e-12);
     }
 }
