@@ -9,7 +9,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-step() { printf '\n==> %s\n' "$*"; }
+# Each step names the free disk space too: a clean run fills ~9 GB (target 6.3, fuzz/target 2.0, .venv 0.6).
+step() { printf '\n==> %s   [%s free on the build disk]\n' "$*" "$(df -h --output=avail . | tail -1 | tr -d ' ')"; }
 
 features=()
 if [ "${VOLTAB_GPU:-1}" != 0 ]; then
