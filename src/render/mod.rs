@@ -13,6 +13,7 @@
 //! - [`frame`]: the methods' orthonormal frame (Duff et al. 2017).
 //! - [`voxel`]: voxel media and directional lights (POP and its grid Monte-Carlo reference).
 //! - [`occluder`]: opaque geometry as a segment/ray blocking query (POP and its reference).
+//! - [`spot`]: the `KHR_lights_punctual` spot cone and its falloff (one home).
 //! - [`optics`]: Fresnel reflectance, refraction, reflection at smooth dielectric interfaces (one home).
 //! - [`gpu`]: device choice, wgpu context, shader validation (the passes live with their techniques).
 //!
@@ -28,6 +29,7 @@ pub mod gbuffer;
 pub mod gpu;
 pub mod occluder;
 pub mod optics;
+pub mod spot;
 pub mod voxel;
 
 use glam::DVec3;

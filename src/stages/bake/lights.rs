@@ -22,6 +22,7 @@ use glam::DVec3;
 
 use crate::render::color::luminance;
 use crate::render::frame::frame;
+use crate::render::spot::SpotCone;
 use crate::scene::{LightKind, Mesh, Scene};
 
 /// A point on an area light sampled by area: a differential patch.
@@ -61,7 +62,7 @@ pub enum Source {
 #[derive(Debug, Clone, PartialEq)]
 enum Delta {
     Point { position: DVec3, intensity: [f64; 3] },
-    Spot { position: DVec3, axis: DVec3, cos_outer: f64, scale: f64, intensity: [f64; 3] },
+    Spot { position: DVec3, cone: SpotCone, intensity: [f64; 3] },
     Directional { toward: DVec3, irradiance: [f64; 3] },
 }
 
@@ -121,11 +122,11 @@ impl BakeLights {
                     out.deltas.push(Delta::Point { position: DVec3::from_array(*position), intensity: rgb });
                 }
                 LightKind::Spot { position, direction, inner_cone, outer_cone } => {
-                    let Some(axis) = unit(DVec3::from_array(*direction)) else { continue };
-                    let (ci, co) = (inner_cone.cos(), outer_cone.cos());
-                    let scale = 1.0 / (ci - co).max(1e-3);
+                    let Some(cone) = SpotCone::khr(DVec3::from_array(*direction), *inner_cone, *outer_cone) else {
+                        continue;
+                    };
                     let position = DVec3::from_array(*position);
-                    out.deltas.push(Delta::Spot { position, axis, cos_outer: co, scale, intensity: rgb });
+                    out.deltas.push(Delta::Spot { position, cone, intensity: rgb });
                 }
                 LightKind::Directional { direction, .. } => {
                     let Some(d) = unit(DVec3::from_array(*direction)) else { continue };
@@ -201,9 +202,9 @@ impl BakeLights {
                 Delta::Point { position, intensity } => {
                     out.push(Source::Point { position: *position, intensity: *intensity });
                 }
-                Delta::Spot { position, axis, cos_outer, scale, intensity } => {
+                Delta::Spot { position, cone, intensity } => {
                     let Some(to_x) = unit(x - *position) else { continue };
-                    let t = ((to_x.dot(*axis) - cos_outer) * scale).clamp(0.0, 1.0);
+                    let t = cone.ramp(to_x);
                     if t > 0.0 {
                         out.push(Source::Point { position: *position, intensity: intensity.map(|c| c * t * t) });
                     }

@@ -47,6 +47,7 @@ use glam::DVec3;
 use super::shaders;
 use crate::physics::rng::StreamKey;
 use crate::render::gpu::context::{Gpu, GpuError, Pass, PassTime, Words};
+use crate::render::spot::SpotCone;
 use crate::render::{DistanceImage, Image, ViewCamera};
 use crate::stages::god_rays::factor::{BETA_NODES, Factorization};
 use crate::stages::god_rays::rectify::{Geo, Setup, SliceLayout};
@@ -121,15 +122,18 @@ fn head_words(
     };
     w = word4(w, f3(setup.geo.toward()), kind);
     w = word4(w, f3(pos), dist as f32);
-    let (axis, ci, co) = match light {
-        EpiLight::Directional { direction, .. } => (DVec3::from_array(*direction), 1.0, 0.0),
-        EpiLight::Spot { direction, inner_cone, outer_cone, .. } => {
-            (DVec3::from_array(*direction).try_normalize().unwrap_or(DVec3::NEG_Y), inner_cone.cos(), outer_cone.cos())
+    // A spot without a cone (degenerate axis or angles) lights nothing, as on the CPU: cos_outer 2.
+    let cone = match light {
+        EpiLight::Directional { direction, .. } => {
+            SpotCone { axis: DVec3::from_array(*direction), cos_outer: 0.0, inv_range: 1.0 }
+        }
+        EpiLight::Spot { .. } => {
+            light.cone().unwrap_or(SpotCone { axis: DVec3::NEG_Y, cos_outer: 2.0, inv_range: 1.0 })
         }
     };
-    w = word4(w, f3(axis), ci as f32);
+    w = word4(w, f3(cone.axis), cone.inv_range as f32);
     let strength = light.strength().map(|c| if c.is_finite() { c.max(0.0) as f32 } else { 0.0 });
-    w = word4(w, strength, co as f32);
+    w = word4(w, strength, cone.cos_outer as f32);
     match shadow.frame {
         LightFrame::Ortho { origin, ax_u, ax_v, dir, extent } => {
             w = word4(w, f3(origin), 0.0);

@@ -30,7 +30,7 @@
 //!   `u` the distance the light travelled inside the box to reach `x` (from where its ray enters the
 //!   box, [`EpiMedium::light_entry`]). Spot light (inside the box): `L_in = I · falloff · texture ·
 //!   e^{−σ_t r} / r²` with `r` the distance to the light and the KHR falloff `clamp((cos θ − cos θ_o)/
-//!   (cos θ_i − cos θ_o), 0, 1)²`.
+//!   max(cos θ_i − cos θ_o, 10⁻³), 0, 1)²` ([`crate::render::spot`]).
 //! - The epipolar split of the directional attenuation: with `a` the coordinate along the direction to
 //!   the light measured from the eye, `u = a_entry(γ) − a(x)`, so `e^{−σ_t s}·e^{−σ_t u} =
 //!   e^{−σ_t γ tan(β/2)} · e^{−σ_t a_entry(γ)}`: the first factor is the (still exponential) kernel
@@ -70,6 +70,7 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::render::spot::SpotCone;
 use crate::render::{DistanceImage, Image, RgbImage, ViewCamera};
 use crate::scene::{Boundary, Density, LightKind, Scene};
 
@@ -146,15 +147,22 @@ impl EpiLight {
         }
     }
 
-    /// KHR spot falloff of the unit direction `w` from the light (1 for a directional light).
+    /// A spot light's cone (`None` for a directional light, or a spot whose axis or angles are degenerate).
+    pub fn cone(&self) -> Option<SpotCone> {
+        match self {
+            EpiLight::Directional { .. } => None,
+            EpiLight::Spot { direction, inner_cone, outer_cone, .. } => {
+                SpotCone::khr(DVec3::from_array(*direction), *inner_cone, *outer_cone)
+            }
+        }
+    }
+
+    /// KHR spot falloff of the unit direction `w` from the light ([`crate::render::spot`]; 1 for a
+    /// directional light, 0 for a spot without a cone).
     pub fn falloff(&self, w: DVec3) -> f64 {
         match self {
             EpiLight::Directional { .. } => 1.0,
-            EpiLight::Spot { direction, inner_cone, outer_cone, .. } => {
-                let (ci, co) = (inner_cone.cos(), outer_cone.cos());
-                let t = ((w.dot(DVec3::from_array(*direction)) - co) / (ci - co).max(1e-6)).clamp(0.0, 1.0);
-                t * t
-            }
+            EpiLight::Spot { .. } => self.cone().map_or(0.0, |c| c.falloff(w)),
         }
     }
 }

@@ -306,7 +306,8 @@ pub fn importance_map(
     size: [usize; 2],
 ) -> Result<EnvMap, String> {
     use super::radial::RadialGrid;
-    use super::radial_propagate::{PointLight, Spot, propagate};
+    use super::radial_propagate::{PointLight, propagate};
+    use crate::render::spot::SpotCone;
     let n = n.clamp(2, 64);
     let (w, h) = (size[0].max(1), size[1].max(1));
     // The frustum's half-diagonal: the smallest cosine between the axis and a corner ray.
@@ -315,7 +316,7 @@ pub fn importance_map(
     let eye = PointLight {
         position: camera.position,
         intensity: [1.0; 3],
-        spot: Some(Spot { axis: camera.forward, cos_outer: (cos_outer - 1e-3).max(-1.0), inv_range: 1e3 }),
+        spot: Some(SpotCone { axis: camera.forward, cos_outer: (cos_outer - 1e-3).max(-1.0), inv_range: 1e3 }),
         normal: None,
     };
     let grid = RadialGrid::new(medium, camera.position, n, n, occluder)?;

@@ -45,17 +45,7 @@ use super::propagate::{self, FlowTable, PhaseTimes, Settings};
 use super::radial::{NONE, RadialGrid, cell_solid_angle};
 use crate::physics::hg;
 use crate::render::color::Rgb;
-
-/// A spot light's cone (KHR_lights_punctual falloff).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Spot {
-    /// Unit axis the spot shines along.
-    pub axis: DVec3,
-    /// `cos` of the outer cone half-angle.
-    pub cos_outer: f64,
-    /// `1/(cos θ_inner − cos θ_outer)`, the denominator floored at 1e-3.
-    pub inv_range: f64,
-}
+use crate::render::spot::SpotCone;
 
 /// A point (or spot) light.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -65,7 +55,7 @@ pub struct PointLight {
     /// Radiant intensity per channel \[W/sr\] (on the axis, for a spot).
     pub intensity: Rgb,
     /// The cone of a spot light; `None`: isotropic.
-    pub spot: Option<Spot>,
+    pub spot: Option<SpotCone>,
     /// The unit normal of a Lambertian emitter (a VPL standing for part of an area light): the intensity
     /// falls off as `max(0, n·w)` (`intensity` is the value along `n`); `None`: no cosine falloff.
     pub normal: Option<DVec3>,
@@ -77,10 +67,7 @@ impl PointLight {
     pub fn profile(&self, w: DVec3) -> f64 {
         let cone = match self.spot {
             None => 1.0,
-            Some(s) => {
-                let f = ((s.axis.dot(w) - s.cos_outer) * s.inv_range).clamp(0.0, 1.0);
-                f * f
-            }
+            Some(s) => s.falloff(w),
         };
         match self.normal {
             None => cone,

@@ -11,8 +11,9 @@
 
 use glam::DVec3;
 
-use super::radial_propagate::{PointLight, Spot};
+use super::radial_propagate::PointLight;
 use crate::render::occluder::Occluder;
+use crate::render::spot::SpotCone;
 use crate::render::voxel::{DirectionalLight, VoxelMedium};
 use crate::scene::bvh::SceneBvh;
 use crate::scene::{Boundary, LightKind, Scene};
@@ -296,10 +297,8 @@ pub fn scene_media(
                 &l.name,
             ),
             LightKind::Spot { position, direction, inner_cone, outer_cone } => {
-                match DVec3::from_array(*direction).try_normalize() {
-                    Some(axis) => {
-                        let (ci, co) = (inner_cone.cos(), outer_cone.cos());
-                        let spot = Spot { axis, cos_outer: co, inv_range: 1.0 / (ci - co).max(1e-3) };
+                match SpotCone::khr(DVec3::from_array(*direction), *inner_cone, *outer_cone) {
+                    Some(spot) => {
                         let p = PointLight {
                             position: DVec3::from_array(*position),
                             intensity: l.radiance,
@@ -308,7 +307,10 @@ pub fn scene_media(
                         };
                         point(p, &l.name)
                     }
-                    None => Some(format!("light \"{}\": spot direction is zero or not finite", l.name)),
+                    None => Some(format!(
+                        "light \"{}\": spot direction is zero or not finite, or a cone angle is not finite",
+                        l.name
+                    )),
                 }
             }
             LightKind::Sphere { center, radius } => {

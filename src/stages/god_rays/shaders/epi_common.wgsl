@@ -18,7 +18,7 @@ struct EpiParams {
     cam_up: vec4<f32>,    // xyz up, w height (px)
     geo_t: vec4<f32>,     // xyz unit direction from the eye to the light, w kind (0 directional, 1 spot)
     geo_pos: vec4<f32>,   // xyz spot position, w eye–spot distance
-    light_dir: vec4<f32>, // xyz spot cone axis, w cos(inner cone)
+    light_dir: vec4<f32>, // xyz spot cone axis, w 1/max(cos(inner) − cos(outer), 1e-3) (render::spot)
     light_str: vec4<f32>, // xyz irradiance (directional) or intensity (spot), w cos(outer cone)
     fr_origin: vec4<f32>, // shadow frame: xyz window corner (ortho) or light position (persp), w kind (0 ortho, 1 persp)
     fr_u: vec4<f32>,      // xyz ax_u (ortho) or right (persp), w extent_u (ortho) or tan_half (persp)
@@ -168,9 +168,7 @@ fn modulation(p: vec3<f32>) -> vec3<f32> {
         if len <= 0.0 {
             return vec3<f32>(0.0);
         }
-        let ci = P.light_dir.w;
-        let co = P.light_str.w;
-        let t = clamp((dot(r / len, P.light_dir.xyz) - co) / max(ci - co, 1e-6), 0.0, 1.0);
+        let t = clamp((dot(r / len, P.light_dir.xyz) - P.light_str.w) * P.light_dir.w, 0.0, 1.0);
         fall = vec3<f32>(t * t);
     } else {
         let c = clip_region(p, P.geo_t.xyz);
