@@ -326,7 +326,8 @@ fn ms_lobes_rows(
         let table_b = MsLobesTable::from_arrays(&full, &gen_b.arrays, &gen_b.values).map_err(BenchError::Variant)?;
         let mut note = String::new();
         for (rho, z) in [(5.0, 5.0), (10.0, 5.0), (5.0, 10.0)] {
-            let (rel, l1, peak) = symmetry_error(&table, 0.9545, g, rho, z).map_err(BenchError::Variant)?;
+            let (rel, l1, peak) =
+                symmetry_error(&table, 0.9545, g, rho, z).map_err(|e| BenchError::Variant(e.to_string()))?;
             let noise = 0.71 * lobe_l1_difference(&table, &table_b, 0.9545, g, rho, z)?;
             note.push_str(&format!(
                 "({rho}, {z}): {:.1} % integrated (noise floor {:.1} %), {:.1} % of the peak at worst, peak {peak:.1} deg off axis; ",
@@ -355,7 +356,9 @@ fn lobe_l1_difference(
     rho: f64,
     z: f64,
 ) -> Result<f64, BenchError> {
-    use crate::tables::ms_lobes::LobeQuery;
+    use crate::tables::ms_lobes::{LobeQuery, MsLobesTable};
+    let lobe_total =
+        |t: &MsLobesTable, q: &LobeQuery| t.lobe(q).map(|v| v.total).map_err(|e| BenchError::Variant(e.to_string()));
     let (nt, np) = a.lobe_nodes();
     let node = |i: usize, n: usize| std::f64::consts::PI * i as f64 / (n.max(2) - 1) as f64;
     let trapezoid = |i: usize, n: usize| if i == 0 || i + 1 == n { 0.5 } else { 1.0 };
@@ -363,8 +366,7 @@ fn lobe_l1_difference(
     for i in 0..nt {
         for m in 0..np {
             let q = LobeQuery { albedo, g, rho, z, theta: node(i, nt), phi: node(m, np) };
-            let (x, y) =
-                (a.lobe(&q).map_err(BenchError::Variant)?.total, b.lobe(&q).map_err(BenchError::Variant)?.total);
+            let (x, y) = (lobe_total(a, &q)?, lobe_total(b, &q)?);
             let w = trapezoid(i, nt) * trapezoid(m, np) * node(i, nt).sin();
             diff += w * (x - y).abs();
             norm += w * x;

@@ -31,7 +31,7 @@ use super::points::SurfaceSample;
 use super::render::solid_angle;
 use crate::render::dielectric::{Material, Setup};
 use crate::scene::bvh::Ray;
-use crate::tables::ms_lobes::LobeSlice;
+use crate::tables::ms_lobes::{LobeQueryError, LobeSlice};
 
 /// A further internal reflection stops the series once it adds less than this share of the power
 /// emitted so far (every channel).
@@ -103,7 +103,7 @@ pub fn emission(
     epsilon: f64,
     clamp: [f64; 3],
     max_terms: usize,
-) -> Result<Emission, String> {
+) -> Result<Emission, LobeQueryError> {
     let m: Material = setup.material;
     let chord: Vec<f64> = samples.par_iter().map(|s| chord(setup, s, -s.normal)).collect();
     let first: Vec<[f64; 3]> = samples
@@ -140,7 +140,7 @@ pub fn emission(
     // Transfers: per receiver, (cut entry, irradiance per unit flux per channel).
     let transfers: Vec<Vec<(CutEntry, [f64; 3])>> = samples
         .par_iter()
-        .map(|s| -> Result<Vec<(CutEntry, [f64; 3])>, String> {
+        .map(|s| -> Result<Vec<(CutEntry, [f64; 3])>, LobeQueryError> {
             let p = s.position;
             let mut cut = Vec::new();
             tree.cut(
@@ -180,7 +180,7 @@ pub fn emission(
                     if ss <= 0.0 {
                         continue;
                     }
-                    let psi = |origin: DVec3| -> Result<f64, String> {
+                    let psi = |origin: DVec3| -> Result<f64, LobeQueryError> {
                         let v = p - origin;
                         let z = v.dot(dir);
                         let rho = (v - z * dir).length();
@@ -194,7 +194,7 @@ pub fn emission(
             }
             Ok(out)
         })
-        .collect::<Result<_, String>>()?;
+        .collect::<Result<_, LobeQueryError>>()?;
     // The series.
     let mut total = first.clone();
     let mut term = first;

@@ -72,10 +72,13 @@ pub(super) fn compare(
             for theta in PROBE_THETAS {
                 let ((rc, zc), want) =
                     cell_average(def, rho, z, &|r, zz| beam_adjoint::double_symmetric(r, zz, theta, g))?;
-                let got = table.double_lobe(&LobeQuery { albedo, g, rho: rc, z: zc, theta, phi: 0.0 })?;
+                let got = table
+                    .double_lobe(&LobeQuery { albedo, g, rho: rc, z: zc, theta, phi: 0.0 })
+                    .map_err(|e| e.to_string())?;
                 c.double_rel = c.double_rel.max((got - want).abs() / want);
             }
-            c.double_hits = c.double_hits.min(expected_second_collisions(def, table, g, rho, z)?);
+            c.double_hits =
+                c.double_hits.min(expected_second_collisions(def, table, g, rho, z).map_err(|e| e.to_string())?);
             // Totals only where the backward walk's heavy tail is tame (|g| <= 0.7: at g = 0.9 its
             // scores near the beam axis make seeds disagree by 2x).
             if g.abs() > 0.7 {
@@ -83,7 +86,7 @@ pub(super) fn compare(
             }
             let theta = std::f64::consts::FRAC_PI_2;
             let (mean, se) = reference(rho, z, theta, g, albedo)?;
-            let got = table.lobe(&LobeQuery { albedo, g, rho, z, theta, phi: 0.0 })?.total;
+            let got = table.lobe(&LobeQuery { albedo, g, rho, z, theta, phi: 0.0 }).map_err(|e| e.to_string())?.total;
             c.total_rel = c.total_rel.max((got - mean).abs() / mean);
             c.total_z = c.total_z.max((got - mean).abs() / se.max(f64::MIN_POSITIVE));
             c.ref_rel_noise = c.ref_rel_noise.max(se / mean);
@@ -100,11 +103,11 @@ pub(super) fn expected_second_collisions(
     g: f64,
     rho: f64,
     z: f64,
-) -> Result<f64, String> {
+) -> Result<f64, LobeQueryError> {
     let (ra, za) = (def.rho_axis(), def.z_axis());
     let (ir, iz) = match (ra.cell(rho), za.cell(z)) {
         (Some(a), Some(b)) => (a, b),
-        _ => return Err(format!("({rho}, {z}) is outside the grid")),
+        _ => return Err(LobeQueryError::Invalid(format!("({rho}, {z}) is outside the grid"))),
     };
     let (r0, r1) = (ra.edge(ir), ra.edge(ir + 1));
     let volume = std::f64::consts::PI * (r1 * r1 - r0 * r0) * (za.edge(iz + 1) - za.edge(iz));
@@ -178,7 +181,7 @@ pub(super) fn cached_adjoint(max_order: usize) -> impl Fn(f64, f64, f64, f64, f6
 
 /// `∫ density dV` over the grid for albedo node `ai` of g slice `gi`, and `Σ_{k=2}^{K} α^k · inside_k`
 /// (what the integer tallies put inside), for the conservation check.
-pub fn conservation(def: &MsLobes, table: &MsLobesTable, gi: usize, ai: usize) -> Result<(f64, f64), String> {
+pub fn conservation(def: &MsLobes, table: &MsLobesTable, gi: usize, ai: usize) -> Result<(f64, f64), LobeQueryError> {
     let (rho, z) = (def.rho_axis(), def.z_axis());
     let albedo = def.albedo_values()[ai];
     let g = def.g_values()[gi];
@@ -284,7 +287,7 @@ impl MsLobes {
             let mut worst = 0.0f64;
             let mut worst_law = 0.0f64;
             for gi in 0..self.g_values().len() {
-                let (integral, tallied) = conservation(self, &table, gi, ai)?;
+                let (integral, tallied) = conservation(self, &table, gi, ai).map_err(|e| e.to_string())?;
                 worst = worst.max((integral / tallied - 1.0).abs());
                 worst_law = worst_law.max((integral / (a * a / (1.0 - a)) - 1.0).abs());
             }
@@ -308,7 +311,7 @@ impl MsLobes {
             let mut worst = 0.0f64;
             for g in probe_gs(self) {
                 for (rho, z) in probes(self) {
-                    worst = worst.max(symmetry_error(&table, albedo, g, rho, z)?.1);
+                    worst = worst.max(symmetry_error(&table, albedo, g, rho, z).map_err(|e| e.to_string())?.1);
                 }
             }
             errors.push(ErrorEstimate {
@@ -350,10 +353,16 @@ impl MsLobes {
 /// `Full` table, with `L̄(θ)` the azimuthal average (what a symmetric table stores): (largest
 /// `|L(θ, φ) − L̄(θ)|` over the lobe nodes relative to the lobe's maximum, `∫|L − L̄| dω / ∫ L dω`, angle
 /// of the full lobe's peak from the symmetry axis in degrees).
-pub fn symmetry_error(table: &MsLobesTable, albedo: f64, g: f64, rho: f64, z: f64) -> Result<(f64, f64, f64), String> {
+pub fn symmetry_error(
+    table: &MsLobesTable,
+    albedo: f64,
+    g: f64,
+    rho: f64,
+    z: f64,
+) -> Result<(f64, f64, f64), LobeQueryError> {
     let (nt, np) = table.lobe_nodes();
     if np < 2 {
-        return Err("the symmetric-lobe error needs a Full lobe table".into());
+        return Err(LobeQueryError::Invalid("the symmetric-lobe error needs a Full lobe table".into()));
     }
     let node = |i: usize, n: usize| std::f64::consts::PI * i as f64 / (n - 1) as f64;
     let trapezoid = |i: usize, n: usize| if i == 0 || i == n - 1 { 0.5 } else { 1.0 };

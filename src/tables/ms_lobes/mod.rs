@@ -46,7 +46,7 @@ pub use errors::{
 };
 pub use materials::{Material, material, materials};
 pub use slice::LobeSlice;
-pub use table::{LobeQuery, LobeValue, LobesReadError, MediumChannel, MsLobesTable};
+pub use table::{LobeQuery, LobeQueryError, LobeValue, LobesReadError, MediumChannel, MsLobesTable};
 
 use super::phase_hg::Element;
 use super::{ErrorEstimate, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};

@@ -8,7 +8,7 @@
 //! clamping: the g/albedo blend is linear, so only the rounding differs (the blend happens once
 //! instead of per look-up).
 
-use super::table::{Located, beam_coordinates, scale_cubed};
+use super::table::{LobeQueryError, Located, beam_coordinates, scale_cubed};
 use super::{LobeQuery, LobeValue, MediumChannel, MsLobesTable};
 use crate::physics::lobe_transport::decay_rate;
 
@@ -34,10 +34,10 @@ pub struct LobeSlice<'a> {
 
 impl MsLobesTable {
     /// Extracts the lobes of one channel; refuses an albedo or g the table cannot answer and a bad σ_t.
-    pub fn slice(&self, medium: &MediumChannel) -> Result<LobeSlice<'_>, String> {
+    pub fn slice(&self, medium: &MediumChannel) -> Result<LobeSlice<'_>, LobeQueryError> {
         let st = medium.sigma_t;
         if !(st.is_finite() && st > 0.0) {
-            return Err(format!("sigma_t = {st} must be finite and > 0"));
+            return Err(LobeQueryError::Invalid(format!("sigma_t = {st} must be finite and > 0")));
         }
         let (gw, aw) = self.weights(medium.albedo, medium.g)?;
         let lobe_len = self.theta_bins * self.phi_nodes;
@@ -53,11 +53,10 @@ impl MsLobesTable {
             }
         };
         for &(gi, wg) in gw.iter().filter(|w| w.1 > 0.0) {
-            let d = self.double.get(&gi).ok_or_else(|| format!("g slice {} is not loaded", self.g_values()[gi]))?;
+            let d = self.double.get(&gi).ok_or_else(|| self.not_loaded(gi, None))?;
             add(&mut e2, d, wg);
             for &(ai, wa) in aw.iter().filter(|w| w.1 > 0.0) {
-                let missing =
-                    || format!("slice (albedo {}, g {}) is not loaded", self.albedo_values()[ai], self.g_values()[gi]);
+                let missing = || self.not_loaded(gi, Some(ai));
                 add(&mut total, self.total.get(&(gi, ai)).ok_or_else(missing)?, wg * wa);
                 add(&mut density, self.density.get(&(gi, ai)).ok_or_else(missing)?, wg * wa);
             }
@@ -85,7 +84,7 @@ impl LobeSlice<'_> {
     }
 
     /// The table's interpolation weights at canonical `(ρ, z, θ, φ)` for this channel.
-    fn locate(&self, rho: f64, z: f64, theta: f64, phi: f64) -> Result<Located, String> {
+    fn locate(&self, rho: f64, z: f64, theta: f64, phi: f64) -> Result<Located, LobeQueryError> {
         let m = &self.medium;
         self.table.locate(&LobeQuery { albedo: m.albedo, g: m.g, rho, z, theta, phi })
     }
@@ -97,7 +96,7 @@ impl LobeSlice<'_> {
     }
 
     /// [`MsLobesTable::lobe`] at canonical `(ρ, z, θ, φ)` for this channel.
-    pub fn lobe(&self, rho: f64, z: f64, theta: f64, phi: f64) -> Result<LobeValue, String> {
+    pub fn lobe(&self, rho: f64, z: f64, theta: f64, phi: f64) -> Result<LobeValue, LobeQueryError> {
         let m = &self.medium;
         let at = self.locate(rho, z, theta, phi)?;
         let lobe_len = self.table.theta_bins * self.table.phi_nodes;
@@ -108,14 +107,24 @@ impl LobeSlice<'_> {
 
     /// [`MsLobesTable::radiance`] for this channel: the radiance scattered at `x` toward `omega` per
     /// unit length and per unit power of a beam leaving `beam.0` along `beam.1`.
-    pub fn radiance(&self, beam: ([f64; 3], [f64; 3]), x: [f64; 3], omega: [f64; 3]) -> Result<LobeValue, String> {
+    pub fn radiance(
+        &self,
+        beam: ([f64; 3], [f64; 3]),
+        x: [f64; 3],
+        omega: [f64; 3],
+    ) -> Result<LobeValue, LobeQueryError> {
         let st = self.medium.sigma_t;
         let (rho, z, theta, phi) = beam_coordinates(self.table.lobe, st, beam, x, omega)?;
         scale_cubed(self.lobe(rho, z, theta, phi)?, st)
     }
 
     /// The `total` of [`Self::radiance`] alone (one array sampled instead of two).
-    pub fn total_radiance(&self, beam: ([f64; 3], [f64; 3]), x: [f64; 3], omega: [f64; 3]) -> Result<f64, String> {
+    pub fn total_radiance(
+        &self,
+        beam: ([f64; 3], [f64; 3]),
+        x: [f64; 3],
+        omega: [f64; 3],
+    ) -> Result<f64, LobeQueryError> {
         let st = self.medium.sigma_t;
         let (rho, z, theta, phi) = beam_coordinates(self.table.lobe, st, beam, x, omega)?;
         let total = self.total_at(&self.locate(rho, z, theta, phi)?);
@@ -125,7 +134,12 @@ impl LobeSlice<'_> {
     /// `total − double` of [`Self::radiance`] (scattering orders ≥ 3) with one array look-up inside the
     /// grid (the same value up to rounding); beyond it the two parts decay at different rates and are
     /// looked up separately.
-    pub fn multiple_radiance(&self, beam: ([f64; 3], [f64; 3]), x: [f64; 3], omega: [f64; 3]) -> Result<f64, String> {
+    pub fn multiple_radiance(
+        &self,
+        beam: ([f64; 3], [f64; 3]),
+        x: [f64; 3],
+        omega: [f64; 3],
+    ) -> Result<f64, LobeQueryError> {
         let st = self.medium.sigma_t;
         let (rho, z, theta, phi) = beam_coordinates(self.table.lobe, st, beam, x, omega)?;
         let at = self.locate(rho, z, theta, phi)?;
@@ -139,7 +153,7 @@ impl LobeSlice<'_> {
     }
 
     /// [`MsLobesTable::density`] at canonical `(ρ, z)` for this channel.
-    pub fn density(&self, rho: f64, z: f64) -> Result<f64, String> {
+    pub fn density(&self, rho: f64, z: f64) -> Result<f64, LobeQueryError> {
         let at = self.locate(rho, z, 0.0, 0.0)?;
         Ok(at.sample_cells(&self.density) * at.decay(self.kappa))
     }

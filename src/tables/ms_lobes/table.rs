@@ -35,6 +35,45 @@ use crate::tables::TableDef;
 /// Failure to load an `MsLobes` table.
 pub type LobesReadError = crate::tables::TableReadError;
 
+/// A look-up the table cannot answer (the lobe twin of the ZH table's `QueryError`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum LobeQueryError {
+    /// An argument is out of its domain: not finite, a negative ρ, θ or φ outside [0, π], a zero vector,
+    /// σ_t ≤ 0 or an albedo outside [0, 1].
+    #[error("{0}")]
+    Invalid(String),
+    /// The albedo lies inside [0, 1] but outside the tabulated nodes.
+    #[error("albedo = {albedo} is outside the table's albedo range [{min}, {max}]; add it (albedos or albedo_grid)")]
+    AlbedoOutOfRange {
+        /// Requested albedo.
+        albedo: f64,
+        /// Smallest tabulated albedo.
+        min: f64,
+        /// Largest tabulated albedo.
+        max: f64,
+    },
+    /// The medium's g lies outside the tabulated slices.
+    #[error("g = {g} is outside the table's g range [{min}, {max}]; add it to the table's g list")]
+    GOutOfRange {
+        /// Requested g.
+        g: f64,
+        /// Smallest tabulated g.
+        min: f64,
+        /// Largest tabulated g.
+        max: f64,
+    },
+    /// The slices the query needs were not loaded (a table loaded for other media).
+    #[error("{0} is not loaded")]
+    NotLoaded(String),
+    /// `σ_t³` times the canonical value overflows.
+    #[error("sigma_t = {sigma_t} overflows the σ_t³ scaling of the lobe; use scene units nearer 1/σ_t")]
+    Overflow {
+        /// The medium's extinction.
+        sigma_t: f64,
+    },
+}
+
 /// One colour channel of a homogeneous medium, scene units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MediumChannel {
@@ -187,7 +226,7 @@ impl MsLobesTable {
             }
             Some(list) => {
                 for &(albedo, g) in list {
-                    let (gw, aw) = table.weights(albedo, g).map_err(layout)?;
+                    let (gw, aw) = table.weights(albedo, g).map_err(|e| layout(e.to_string()))?;
                     for (gi, wg) in gw {
                         for &(ai, wa) in &aw {
                             if wg > 0.0 && wa > 0.0 {
@@ -320,46 +359,51 @@ impl MsLobesTable {
 
     /// Interpolation weights over g slices and albedo nodes.
     #[allow(clippy::type_complexity)]
-    pub(super) fn weights(&self, albedo: f64, g: f64) -> Result<(Vec<(usize, f64)>, Vec<(usize, f64)>), String> {
+    pub(super) fn weights(
+        &self,
+        albedo: f64,
+        g: f64,
+    ) -> Result<(Vec<(usize, f64)>, Vec<(usize, f64)>), LobeQueryError> {
         if !(0.0..=1.0).contains(&albedo) {
-            return Err(format!("albedo = {albedo} is outside [0, 1]"));
+            return Err(LobeQueryError::Invalid(format!("albedo = {albedo} is outside [0, 1]")));
         }
         let gw = self.g_weights(g)?;
         // Nodes in s = √(1 − α) increase as α decreases: bracket on the reversed list.
         let n = self.albedos.len();
-        let aw = bracket(&self.s_nodes, s_of(albedo)).ok_or_else(|| {
-            format!(
-                "albedo = {albedo} is outside the table's albedo range [{}, {}]; add it (albedos or albedo_grid)",
-                self.albedos.first().copied().unwrap_or(f64::NAN),
-                self.albedos.last().copied().unwrap_or(f64::NAN)
-            )
+        let aw = bracket(&self.s_nodes, s_of(albedo)).ok_or_else(|| LobeQueryError::AlbedoOutOfRange {
+            albedo,
+            min: self.albedos.first().copied().unwrap_or(f64::NAN),
+            max: self.albedos.last().copied().unwrap_or(f64::NAN),
         })?;
         Ok((gw, aw.into_iter().map(|(i, w)| (n - 1 - i, w)).collect()))
     }
 
     /// Interpolation weights over the g slices.
-    fn g_weights(&self, g: f64) -> Result<Vec<(usize, f64)>, String> {
-        let gw = bracket(&self.gs, g).ok_or_else(|| {
-            format!(
-                "g = {g} is outside the table's g range [{}, {}]; add it to the table's g list",
-                self.gs.first().copied().unwrap_or(f64::NAN),
-                self.gs.last().copied().unwrap_or(f64::NAN)
-            )
+    fn g_weights(&self, g: f64) -> Result<Vec<(usize, f64)>, LobeQueryError> {
+        let gw = bracket(&self.gs, g).ok_or_else(|| LobeQueryError::GOutOfRange {
+            g,
+            min: self.gs.first().copied().unwrap_or(f64::NAN),
+            max: self.gs.last().copied().unwrap_or(f64::NAN),
         })?;
         Ok(gw.into_iter().collect())
     }
 
+    /// The error for a missing `(g, albedo)` slice (or the `E_2` of a g slice, `ai = None`).
+    pub(super) fn not_loaded(&self, gi: usize, ai: Option<usize>) -> LobeQueryError {
+        LobeQueryError::NotLoaded(match ai {
+            Some(ai) => format!("slice (albedo {}, g {})", self.albedos[ai], self.gs[gi]),
+            None => format!("g slice {}", self.gs[gi]),
+        })
+    }
+
     /// The stored lobes at a canonical point (σ_t = 1): `total` = `Σ_{k≥2} α^k E_k`, `double` = `α² E_2`.
-    pub fn lobe(&self, q: &LobeQuery) -> Result<LobeValue, String> {
+    pub fn lobe(&self, q: &LobeQuery) -> Result<LobeValue, LobeQueryError> {
         let (gw, aw) = self.weights(q.albedo, q.g)?;
         let at = self.locate(q)?;
         let mut out = LobeValue { total: 0.0, double: q.albedo * q.albedo * self.e2_at(&gw, &at)? };
         for &(gi, wg) in gw.iter().filter(|w| w.1 > 0.0) {
             for &(ai, wa) in aw.iter().filter(|w| w.1 > 0.0) {
-                let t = self
-                    .total
-                    .get(&(gi, ai))
-                    .ok_or_else(|| format!("slice (albedo {}, g {}) is not loaded", self.albedos[ai], self.gs[gi]))?;
+                let t = self.total.get(&(gi, ai)).ok_or_else(|| self.not_loaded(gi, Some(ai)))?;
                 out.total += wg * wa * at.sample(t, self.theta_bins * self.phi_nodes);
             }
         }
@@ -372,33 +416,33 @@ impl MsLobesTable {
     }
 
     /// `E_2` alone (no albedo factor) at a canonical point; `q.albedo` is ignored.
-    pub fn double_lobe(&self, q: &LobeQuery) -> Result<f64, String> {
+    pub fn double_lobe(&self, q: &LobeQuery) -> Result<f64, LobeQueryError> {
         let gw = self.g_weights(q.g)?;
         let at = self.locate(q)?;
         self.e2_at(&gw, &at)
     }
 
-    fn e2_at(&self, gw: &[(usize, f64)], at: &Located) -> Result<f64, String> {
+    fn e2_at(&self, gw: &[(usize, f64)], at: &Located) -> Result<f64, LobeQueryError> {
         let mut acc = 0.0;
         for &(gi, wg) in gw.iter().filter(|w| w.1 > 0.0) {
-            let e2 = self.double.get(&gi).ok_or_else(|| format!("g slice {} is not loaded", self.gs[gi]))?;
+            let e2 = self.double.get(&gi).ok_or_else(|| self.not_loaded(gi, None))?;
             acc += wg * at.sample(e2, self.theta_bins * self.phi_nodes);
         }
         Ok(acc * at.decay(decay_rate(0.0, 0.0)))
     }
 
     /// Checks a query's coordinates and finds its interpolation weights.
-    pub(super) fn locate(&self, q: &LobeQuery) -> Result<Located, String> {
+    pub(super) fn locate(&self, q: &LobeQuery) -> Result<Located, LobeQueryError> {
         for (name, v) in [("rho", q.rho), ("z", q.z), ("theta", q.theta), ("phi", q.phi), ("albedo", q.albedo)] {
             if !v.is_finite() {
-                return Err(format!("{name} = {v} is not finite"));
+                return Err(LobeQueryError::Invalid(format!("{name} = {v} is not finite")));
             }
         }
         if q.rho < 0.0 {
-            return Err(format!("rho = {} is negative", q.rho));
+            return Err(LobeQueryError::Invalid(format!("rho = {} is negative", q.rho)));
         }
         if !(0.0..=PI).contains(&q.theta) || !(0.0..=PI).contains(&q.phi) {
-            return Err(format!("theta = {} and phi = {} must lie in [0, π]", q.theta, q.phi));
+            return Err(LobeQueryError::Invalid(format!("theta = {} and phi = {} must lie in [0, π]", q.theta, q.phi)));
         }
         // Nearest grid point and the outward decay.
         let rho_b = q.rho.min(self.edges.0);
@@ -460,14 +504,14 @@ impl MsLobesTable {
         beam: ([f64; 3], [f64; 3]),
         x: [f64; 3],
         omega: [f64; 3],
-    ) -> Result<LobeValue, String> {
+    ) -> Result<LobeValue, LobeQueryError> {
         let (rho, z, theta, phi) = beam_coordinates(self.lobe, medium.sigma_t, beam, x, omega)?;
         let q = LobeQuery { albedo: medium.albedo, g: medium.g, rho, z, theta, phi };
         scale_cubed(self.lobe(&q)?, medium.sigma_t)
     }
 
     /// The angle-integrated density `Σ_{k≥2} α^k ψ_k` at canonical `(ρ, z)` (interpolated like [`Self::lobe`]).
-    pub fn density(&self, albedo: f64, g: f64, rho: f64, z: f64) -> Result<f64, String> {
+    pub fn density(&self, albedo: f64, g: f64, rho: f64, z: f64) -> Result<f64, LobeQueryError> {
         let (gw, aw) = self.weights(albedo, g)?;
         let rho_b = rho.min(self.edges.0);
         let z_b = z.clamp(self.edges.1, self.edges.2);
@@ -476,7 +520,7 @@ impl MsLobesTable {
         let mut acc = 0.0;
         for &(gi, wg) in gw.iter().filter(|w| w.1 > 0.0) {
             for &(ai, wa) in aw.iter().filter(|w| w.1 > 0.0) {
-                let v = self.density.get(&(gi, ai)).ok_or("slice not loaded")?;
+                let v = self.density.get(&(gi, ai)).ok_or_else(|| self.not_loaded(gi, Some(ai)))?;
                 acc += wg * wa * spatial.iter().filter(|w| w.1 > 0.0).map(|&(c, w)| w * v[c]).sum::<f64>();
             }
         }
@@ -494,17 +538,17 @@ pub(super) fn beam_coordinates(
     beam: ([f64; 3], [f64; 3]),
     x: [f64; 3],
     omega: [f64; 3],
-) -> Result<(f64, f64, f64, f64), String> {
+) -> Result<(f64, f64, f64, f64), LobeQueryError> {
     let (origin, direction) = beam;
     let st = sigma_t;
     if !(st.is_finite() && st > 0.0) {
-        return Err(format!("sigma_t = {st} must be finite and > 0"));
+        return Err(LobeQueryError::Invalid(format!("sigma_t = {st} must be finite and > 0")));
     }
-    let unit = |v: [f64; 3], name: &str| -> Result<DVec3, String> {
+    let unit = |v: [f64; 3], name: &str| -> Result<DVec3, LobeQueryError> {
         let v = DVec3::from_array(v);
         let n = v.length();
         if !(n.is_finite() && n > 0.0) {
-            return Err(format!("{name} must be a finite non-zero vector"));
+            return Err(LobeQueryError::Invalid(format!("{name} must be a finite non-zero vector")));
         }
         Ok(v / n)
     };
@@ -512,7 +556,7 @@ pub(super) fn beam_coordinates(
     let w = unit(omega, "omega")?;
     let p = DVec3::from_array(x) - DVec3::from_array(origin);
     if !p.is_finite() {
-        return Err("the point and the beam origin must be finite".into());
+        return Err(LobeQueryError::Invalid("the point and the beam origin must be finite".into()));
     }
     let z = p.dot(d);
     let perp = p - z * d;
@@ -544,13 +588,9 @@ pub(super) fn beam_coordinates(
 }
 
 /// A canonical lobe value scaled to a medium of extinction `sigma_t` (`× σ_t³`); refuses an overflow.
-pub(super) fn scale_cubed(v: LobeValue, sigma_t: f64) -> Result<LobeValue, String> {
+pub(super) fn scale_cubed(v: LobeValue, sigma_t: f64) -> Result<LobeValue, LobeQueryError> {
     let s3 = sigma_t * sigma_t * sigma_t;
     let scale = |x: f64| if x == 0.0 { 0.0 } else { x * s3 };
     let out = LobeValue { total: scale(v.total), double: scale(v.double) };
-    if out.total.is_finite() && out.double.is_finite() {
-        Ok(out)
-    } else {
-        Err(format!("sigma_t = {sigma_t} overflows the σ_t³ scaling of the lobe; use scene units nearer 1/σ_t"))
-    }
+    if out.total.is_finite() && out.double.is_finite() { Ok(out) } else { Err(LobeQueryError::Overflow { sigma_t }) }
 }

@@ -191,9 +191,13 @@ fn interpolation_and_refusals() {
     let (lo, hi, mid) = (at(0.5), at(0.9), at(0.75));
     assert!(lo < mid && mid < hi, "{lo} {mid} {hi}");
     let e = t.lobe(&LobeQuery { albedo: 0.9, g: 0.8, rho: 1.0, z: 1.0, theta: 1.0, phi: 0.0 }).unwrap_err();
-    assert!(e.contains("g list"), "{e}");
+    assert_eq!(e, LobeQueryError::GOutOfRange { g: 0.8, min: 0.0, max: 0.7 });
+    assert!(e.to_string().contains("g list"), "{e}");
     let e = t.lobe(&LobeQuery { albedo: 0.95, g: 0.0, rho: 1.0, z: 1.0, theta: 1.0, phi: 0.0 }).unwrap_err();
-    assert!(e.contains("albedo"), "{e}");
+    assert_eq!(e, LobeQueryError::AlbedoOutOfRange { albedo: 0.95, min: 0.5, max: 0.9 });
+    assert!(e.to_string().contains("albedo_grid"), "{e}");
+    let e = t.lobe(&LobeQuery { albedo: 1.5, g: 0.0, rho: 1.0, z: 1.0, theta: 1.0, phi: 0.0 }).unwrap_err();
+    assert!(matches!(e, LobeQueryError::Invalid(_)) && e.to_string().contains("outside [0, 1]"), "{e}");
 }
 
 /// Beyond the grid values decay monotonically outward (never grow, never NaN), and at α = 1 (no
@@ -242,7 +246,7 @@ fn open_loads_only_the_needed_slices() {
     let q = LobeQuery { albedo: 0.95, g: 0.7, rho: 0.7, z: 2.0, theta: 0.3, phi: 0.0 };
     assert_eq!(part.lobe(&q).unwrap(), all.lobe(&q).unwrap());
     let e = part.lobe(&LobeQuery { g: 0.0, ..q }).unwrap_err();
-    assert!(e.contains("not loaded"), "{e}");
+    assert!(matches!(e, LobeQueryError::NotLoaded(_)) && e.to_string().contains("is not loaded"), "{e}");
 }
 
 use crate::tables::TableDef;
@@ -278,7 +282,7 @@ fn slice_matches_the_table() {
     assert_eq!(checked, 5);
     assert!(s.radiance(([0.0; 3], [0.0; 3]), [1.0; 3], [0.0, 0.0, 1.0]).is_err());
     assert!(s.density(f64::NAN, 1.0).is_err());
-    assert!(t.slice(&MediumChannel { albedo: 0.95, ..m }).unwrap_err().contains("albedo"));
-    assert!(t.slice(&MediumChannel { g: 0.8, ..m }).unwrap_err().contains("g list"));
-    assert!(t.slice(&MediumChannel { sigma_t: 0.0, ..m }).is_err());
+    assert!(matches!(t.slice(&MediumChannel { albedo: 0.95, ..m }), Err(LobeQueryError::AlbedoOutOfRange { .. })));
+    assert!(matches!(t.slice(&MediumChannel { g: 0.8, ..m }), Err(LobeQueryError::GOutOfRange { .. })));
+    assert!(matches!(t.slice(&MediumChannel { sigma_t: 0.0, ..m }), Err(LobeQueryError::Invalid(_))));
 }

@@ -193,7 +193,7 @@ impl<'a> Evaluator<'a> {
     /// Irradiance reaching a surface sample from inside from the volume samples: the irradiance `φ/4`
     /// of an isotropic field whose fluence `φ` is that of the light scattered at least once (the table's
     /// scattering-event density of orders ≥ 2 is `σ_s φ`).
-    pub(super) fn inner_irradiance(&self, s: &SurfaceSample) -> Result<[f64; 3], String> {
+    pub(super) fn inner_irradiance(&self, s: &SurfaceSample) -> Result<[f64; 3], LobeQueryError> {
         let mut out = [0.0; 3];
         if self.vol_tree.nodes.is_empty() {
             return Ok(out);
@@ -210,7 +210,7 @@ impl<'a> Evaluator<'a> {
                 }
                 let st = self.sigma(c);
                 let ss = self.ch[c].albedo * st;
-                let fluence = |origin: DVec3, dir: DVec3| -> Result<f64, String> {
+                let fluence = |origin: DVec3, dir: DVec3| -> Result<f64, LobeQueryError> {
                     let v = p - origin;
                     let z = v.dot(dir);
                     let rho = (v - z * dir).length();

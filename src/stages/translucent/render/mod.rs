@@ -85,7 +85,7 @@ use crate::render::ViewCamera;
 use crate::render::dielectric::{Material, Setup};
 use crate::render::optics::{fresnel, reflect, refract};
 use crate::scene::bvh::Ray;
-use crate::tables::ms_lobes::{LobeSlice, MediumChannel, MsLobesTable};
+use crate::tables::ms_lobes::{LobeQueryError, LobeSlice, MediumChannel, MsLobesTable};
 
 mod aggregate;
 mod evaluate;
@@ -296,7 +296,7 @@ fn channels(m: &Material) -> [MediumChannel; 3] {
 }
 
 /// The table's lobes of each channel, extracted once (wang2018 Sec. 4.1).
-fn slices<'t>(table: &'t MsLobesTable, ch: &[MediumChannel; 3]) -> Result<Vec<LobeSlice<'t>>, String> {
+fn slices<'t>(table: &'t MsLobesTable, ch: &[MediumChannel; 3]) -> Result<Vec<LobeSlice<'t>>, LobeQueryError> {
     ch.iter().map(|m| table.slice(m)).collect()
 }
 
@@ -325,10 +325,14 @@ pub fn prepare(
     // Inner irradiance of every surface sample: single-scattered light of the volume samples plus the
     // table's collision density of orders ≥ 2 (φ/4 of an isotropic field).
     let ch = channels(&m);
-    let slices = slices(table, &ch)?;
+    let slices = slices(table, &ch).map_err(|e| e.to_string())?;
     let eval = Evaluator::new(setup, &slices, opts, (&vol_tree, &vol_agg, &vol_items));
-    let inner_irradiance: Vec<[f64; 3]> =
-        points.surface.par_iter().map(|s| eval.inner_irradiance(s)).collect::<Result<Vec<_>, String>>()?;
+    let inner_irradiance: Vec<[f64; 3]> = points
+        .surface
+        .par_iter()
+        .map(|s| eval.inner_irradiance(s))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| e.to_string())?;
 
     // Surface samples as diffuse emitters into the object, with the series of internal reflections.
     let (f_out, f_in) = (diffuse_fresnel(1.0, m.ior), diffuse_fresnel(m.ior, 1.0));
@@ -346,7 +350,8 @@ pub fn prepare(
         opts.epsilon_multiple,
         clamp,
         opts.reflection_terms,
-    )?;
+    )
+    .map_err(|e| e.to_string())?;
     let profile = EmissionProfile { ior: m.ior, f_out, f_in };
     let mu_graze = profile.grazing_median();
     let n_graze = if f_in > 0.0 { opts.grazing_beams } else { 0 };
@@ -543,7 +548,7 @@ pub fn render(
     let n = w * h;
     let m = setup.material;
     let ch = channels(&m);
-    let slices = slices(table, &ch)?;
+    let slices = slices(table, &ch).map_err(|e| e.to_string())?;
     let eval = Evaluator::new(setup, &slices, opts, (&prepared.vol_tree, &prepared.vol_agg, &prepared.vol_items));
 
     // Pass 1: camera paths.
