@@ -31,6 +31,8 @@ use crate::pipeline::{Limits, ValidatedTable};
 use crate::registry::{ValidatedPipeline, ValidatedStage};
 use crate::scene::{Boundary, Density, LightKind, Scene, Surface};
 use crate::stages::StageDef;
+use crate::stages::planning::{ON_NODE, PlannedScenes, StageDecision};
+use crate::stages::pop;
 use crate::tables::TableDef;
 use crate::tables::ms_lobes::MsLobes;
 use crate::tables::phase_hg::{GValues, PhaseHg};
@@ -225,9 +227,6 @@ fn range<'a>(media: impl Iterator<Item = &'a MediumNeed>, f: impl Fn(&MediumNeed
 /// ones: measured on the fog-room test scene, 2·extent alone changes the total irradiance by up to 5e-3,
 /// 2·extent + 4 by 3e-6, 2·extent + 8 by 2e-8 (below f32 storage precision).
 pub const DISTANCE_MARGIN: f64 = 8.0;
-
-/// Tolerance for "a value sits on a node".
-const ON_NODE: f64 = 1e-12;
 
 /// Which nodes bracket `values`: for each value the node at or just below it and the node at or just
 /// above it; `Err(value)` for a value outside the nodes.
@@ -549,61 +548,13 @@ fn plan_ms_lobes(t: &ValidatedTable, d: &MsLobes, needs: &Needs) -> TablePlan {
 
 /// A screen-space effect stage renders its own scene: it runs when that scene is among the planned
 /// scenes and has what the effect needs (`lacks` names what is missing).
-/// What a scene lacks for POP (`PopRender` and its `PopPreset` table): a global medium that scatters
-/// forward (`g ≥ 0`), or a directional, point, spot or sphere light (rectilinear and radial grids) or a
-/// dome light (environment ordinates).
-fn pop_lacks(sc: &Scene) -> Option<&'static str> {
-    use crate::scene::LightKind;
-    let media = sc.media.iter().filter(|m| m.boundary == crate::scene::Boundary::Global).collect::<Vec<_>>();
-    if media.len() != 1 || media[0].g.iter().any(|g| *g < 0.0) {
-        Some("single forward-scattering global medium")
-    } else if sc.environment.is_none()
-        && !sc.lights.iter().any(|l| {
-            matches!(
-                l.kind,
-                LightKind::Directional { .. }
-                    | LightKind::Point { .. }
-                    | LightKind::Spot { .. }
-                    | LightKind::Sphere { .. }
-            )
-        })
-    {
-        Some("directional, point, spot, sphere or dome light")
-    } else {
-        None
-    }
-}
-
-/// What a scene lacks for a `TranslucentRender` stage: a refractive object bounding a medium, or a
-/// point or sphere light.
-fn translucent_lacks(sc: &Scene, t: &crate::stages::translucent::TranslucentRender) -> Option<&'static str> {
-    let bvh = crate::scene::bvh::SceneBvh::build(sc);
-    if crate::render::dielectric::find_object(sc, &bvh).is_none() {
-        Some("closed dielectric mesh bounding a medium")
-    } else if crate::render::dielectric::emitters(sc, t.light_radius).0.is_empty() {
-        Some("point or sphere light")
-    } else {
-        None
-    }
-}
-
-/// The materials of `TranslucentRender` stages whose scene is planned: the `MsLobes` slices they read
-/// are needs like the scenes' own translucent media.
-fn translucent_stage_needs(p: &ValidatedPipeline, scenes: &[&Scene]) -> Vec<MediumNeed> {
-    let base = p.path().parent().unwrap_or(std::path::Path::new("")).to_path_buf();
+/// The materials of the stages that read `MsLobes` slices (`TranslucentRender`), on planned scenes: their
+/// slices are needs like the scenes' own translucent media.
+fn stage_lobe_needs(p: &ValidatedPipeline, scenes: &PlannedScenes) -> Vec<MediumNeed> {
     let mut out = Vec::new();
     for s in p.stages() {
-        let StageDef::TranslucentRender(t) = s.def() else { continue };
-        let path = t.scene_path(&base);
-        let planned = scenes.iter().any(|sc| match (sc.source.canonicalize(), path.canonicalize()) {
-            (Ok(x), Ok(y)) => x == y,
-            _ => sc.source == path,
-        });
-        if !planned {
-            continue;
-        }
-        for name in t.materials.iter().filter(|m| m.as_str() != "Scene") {
-            if let Some(m) = crate::tables::ms_lobes::material(name) {
+        for name in s.def().stage().lobe_materials(scenes) {
+            if let Some(m) = crate::tables::ms_lobes::material(&name) {
                 out.push(MediumNeed {
                     name: format!("{name} (stage {})", s.id()),
                     g: [m.g; 3],
@@ -618,38 +569,16 @@ fn translucent_stage_needs(p: &ValidatedPipeline, scenes: &[&Scene]) -> Vec<Medi
     out
 }
 
-fn effect_stage(
-    s: &ValidatedStage,
-    effect: &str,
-    scene: &str,
-    p: &ValidatedPipeline,
-    scenes: &[&Scene],
-    lacks: impl Fn(&Scene) -> Option<&'static str>,
-) -> StagePlan {
-    let path = p.path().parent().unwrap_or(std::path::Path::new("")).join(scene);
-    let same = |a: &std::path::Path| match (a.canonicalize(), path.canonicalize()) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => a == path,
-    };
-    let (decision, reason) = match scenes.iter().find(|sc| same(&sc.source)) {
-        None => (Decision::Skip, format!("its scene {scene} is not among the planned scenes")),
-        Some(sc) => match lacks(sc) {
-            Some(what) => (Decision::Skip, format!("{scene} has no {what}")),
-            None => (Decision::Compile, format!("renders {effect} of {scene}")),
-        },
-    };
-    let def = (decision == Decision::Compile).then(|| s.def().clone());
-    StagePlan { id: s.id().to_string(), decision, reason, def }
-}
-
 impl Plan {
     /// Plans a pipeline for scenes (their union of needs): `Scene`s, or scenes shared from a
     /// [`crate::scene::cache::SceneCache`].
     pub fn new<S: Borrow<Scene>>(p: &ValidatedPipeline, scenes: &[S]) -> Plan {
         let scenes: Vec<&Scene> = scenes.iter().map(Borrow::borrow).collect();
         let scenes = scenes.as_slice();
+        let base = p.path().parent().unwrap_or(std::path::Path::new(""));
+        let planned = PlannedScenes { base, scenes };
         let mut needs = Needs::of(scenes);
-        needs.translucent.extend(translucent_stage_needs(p, scenes));
+        needs.translucent.extend(stage_lobe_needs(p, &planned));
         let tables: Vec<TablePlan> = p
             .tables()
             .iter()
@@ -659,7 +588,7 @@ impl Plan {
                 TableDef::MsLobes(d) => plan_ms_lobes(t, d, &needs),
                 // A POP preset has no scene slices: it is small and kept whole when a scene has what POP
                 // propagates.
-                TableDef::PopPreset(_) => match scenes.iter().find(|sc| pop_lacks(sc).is_none()) {
+                TableDef::PopPreset(_) => match scenes.iter().find(|sc| pop::scene::lacks(sc).is_none()) {
                     Some(sc) => compiled(
                         t,
                         format!(
@@ -678,103 +607,16 @@ impl Plan {
             })
             .collect();
         let tables = covered_elsewhere(p, tables);
+        let kept = |id: &str| tables.iter().find(|t| t.id == id).and_then(|t| t.def.as_ref());
         let stages = p
             .stages()
             .iter()
-            .map(|s| match s.def() {
-                StageDef::BakeLightmaps(b) => match b.table_ref() {
-                    Some(t) if !tables.iter().any(|tp| tp.id == t && tp.def.is_some()) => StagePlan {
-                        id: s.id().to_string(),
-                        decision: Decision::Skip,
-                        reason: format!("its table {t} is skipped"),
-                        def: None,
-                    },
-                    _ => StagePlan {
-                        id: s.id().to_string(),
-                        decision: Decision::Compile,
-                        reason: format!("bakes {}", b.scene),
-                        def: Some(s.def().clone()),
-                    },
-                },
-                StageDef::EpipolarShadows(e) => effect_stage(s, "god rays", &e.scene, p, scenes, |sc| {
-                    if crate::stages::god_rays::EpiLight::from_scene(sc).is_none() {
-                        Some("directional or spot light")
-                    } else if crate::stages::god_rays::EpiMedium::from_scene(sc).is_none() {
-                        Some("homogeneous global medium")
-                    } else {
-                        None
-                    }
-                }),
-                StageDef::TranslucentRender(t) if !tables.iter().any(|tp| tp.id == t.table && tp.def.is_some()) => {
-                    StagePlan {
-                        id: s.id().to_string(),
-                        decision: Decision::Skip,
-                        reason: format!("its table {} is skipped", t.table),
-                        def: None,
-                    }
-                }
-                StageDef::TranslucentRender(t) => {
-                    let mut plan =
-                        effect_stage(s, "translucent media", &t.scene, p, scenes, |sc| translucent_lacks(sc, t));
-                    // A lobe table the plan skips brackets none of the stage's materials, so holds none of
-                    // them: the stage reads `table` for those and must not open a file this run did not write.
-                    if let Some(StageDef::TranslucentRender(d)) = &mut plan.def {
-                        d.lobe_tables.retain(|l| tables.iter().any(|tp| tp.id == *l && tp.def.is_some()));
-                    }
-                    plan
-                }
-                StageDef::PopRender(r) if !tables.iter().any(|tp| tp.id == r.table && tp.def.is_some()) => StagePlan {
-                    id: s.id().to_string(),
-                    decision: Decision::Skip,
-                    reason: format!("its table {} is skipped", r.table),
-                    def: None,
-                },
-                StageDef::PopRender(r) => {
-                    effect_stage(s, "principal-ordinates propagation", &r.scene, p, scenes, pop_lacks)
-                }
-                StageDef::ImageFog(f) => effect_stage(s, "image-space fog", &f.scene, p, scenes, |sc| {
-                    crate::stages::image_fog::FogMedium::from_scene(sc).is_none().then_some("global medium")
-                }),
-                StageDef::PlotPhase(pp) => {
-                    let table = tables.iter().find(|t| t.id == pp.table);
-                    let kept: Option<Vec<f64>> = table.and_then(|t| match &t.def {
-                        Some(TableDef::PhaseHg(h)) => Some(h.g.values()),
-                        _ => None,
-                    });
-                    match kept {
-                        None => StagePlan {
-                            id: s.id().to_string(),
-                            decision: Decision::Skip,
-                            reason: format!("its table {} is skipped", pp.table),
-                            def: None,
-                        },
-                        Some(kept) => {
-                            let wanted: Vec<f64> = if pp.g.is_empty() {
-                                kept.clone()
-                            } else {
-                                pp.g.iter().copied().filter(|g| kept.iter().any(|k| (k - g).abs() <= ON_NODE)).collect()
-                            };
-                            if wanted.is_empty() {
-                                StagePlan {
-                                    id: s.id().to_string(),
-                                    decision: Decision::Skip,
-                                    reason: "none of the g values it plots is needed by the scene".into(),
-                                    def: None,
-                                }
-                            } else {
-                                let n = wanted.len();
-                                let mut def = pp.clone();
-                                def.g = wanted;
-                                StagePlan {
-                                    id: s.id().to_string(),
-                                    decision: Decision::Compile,
-                                    reason: format!("plots the {n} g values the scene needs"),
-                                    def: Some(StageDef::PlotPhase(def)),
-                                }
-                            }
-                        }
-                    }
-                }
+            .map(|s| {
+                let (decision, reason, def) = match s.def().stage().plan(&planned, &kept) {
+                    StageDecision::Run { reason, def } => (Decision::Compile, reason, Some(*def)),
+                    StageDecision::Skip { reason } => (Decision::Skip, reason, None),
+                };
+                StagePlan { id: s.id().to_string(), decision, reason, def }
             })
             .collect();
         Plan { scenes: scenes.iter().map(|s| s.source.display().to_string()).collect(), needs, tables, stages }

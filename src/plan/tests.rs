@@ -322,7 +322,7 @@ fn a_dome_alone_lights_a_scene_for_pop() {
     // own; a dome light (environment ordinates) is enough.
     let mut s = fog_room();
     s.lights.retain(|l| matches!(l.kind, crate::scene::LightKind::EmissiveMesh { .. }));
-    assert_eq!(pop_lacks(&s), Some("directional, point, spot, sphere or dome light"));
+    assert_eq!(pop::scene::lacks(&s), Some("directional, point, spot, sphere or dome light"));
     s.environment = Some(crate::scene::EnvironmentLight {
         name: "/Sky".into(),
         texture: None,
@@ -330,5 +330,5 @@ fn a_dome_alone_lights_a_scene_for_pop() {
         color: [1.0; 3],
         rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
     });
-    assert_eq!(pop_lacks(&s), None);
+    assert_eq!(pop::scene::lacks(&s), None);
 }

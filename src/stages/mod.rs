@@ -8,6 +8,7 @@
 pub mod bake;
 pub mod god_rays;
 pub mod image_fog;
+pub mod planning;
 pub mod plot_phase;
 pub mod pop;
 pub mod translucent;
@@ -128,6 +129,14 @@ pub trait Stage: Sync {
     }
     /// Scene files the stage reads, resolved against `base_dir` (the pipeline's folder).
     fn scenes(&self, _base_dir: &Path) -> Vec<PathBuf> {
+        Vec::new()
+    }
+    /// Whether a run on the planned `scenes` needs the stage, given the tables the plan keeps, and its
+    /// definition pruned to them ([`planning`]).
+    fn plan(&self, scenes: &planning::PlannedScenes, kept: &planning::KeptTables) -> planning::StageDecision;
+    /// The `MsLobes` materials the stage reads when its scene is planned: the plan keeps their slices
+    /// like those of a scene's own translucent media. None by default.
+    fn lobe_materials(&self, _scenes: &planning::PlannedScenes) -> Vec<String> {
         Vec::new()
     }
     /// Runs the stage on tables compiled into `ctx.out_dir`.

@@ -127,6 +127,28 @@ impl super::Stage for PlotPhase {
     fn check_tables(&self, id: &str, table: &dyn Fn(&str) -> Option<TableDef>) -> Vec<FieldIssue> {
         table(&self.table).and_then(|t| self.check_table(id, &t)).into_iter().collect()
     }
+    fn plan(
+        &self,
+        _scenes: &super::planning::PlannedScenes,
+        kept: &super::planning::KeptTables,
+    ) -> super::planning::StageDecision {
+        use super::planning::{ON_NODE, StageDecision, table_skipped};
+        let Some(TableDef::PhaseHg(table)) = kept(&self.table) else { return table_skipped(&self.table) };
+        let nodes = table.g.values();
+        let wanted: Vec<f64> = if self.g.is_empty() {
+            nodes
+        } else {
+            self.g.iter().copied().filter(|g| nodes.iter().any(|k| (k - g).abs() <= ON_NODE)).collect()
+        };
+        if wanted.is_empty() {
+            return StageDecision::Skip { reason: "none of the g values it plots is needed by the scene".into() };
+        }
+        let reason = format!("plots the {} g values the scene needs", wanted.len());
+        StageDecision::Run {
+            reason,
+            def: Box::new(super::StageDef::PlotPhase(PlotPhase { g: wanted, ..self.clone() })),
+        }
+    }
     fn run(&self, id: &str, ctx: &super::StageContext) -> Result<StageOutcome, StageError> {
         PlotPhase::run(self, id, ctx.out_dir)
     }

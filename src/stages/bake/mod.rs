@@ -736,6 +736,19 @@ impl super::Stage for BakeLightmaps {
     fn scenes(&self, base_dir: &Path) -> Vec<PathBuf> {
         vec![self.scene_path(base_dir)]
     }
+    fn plan(
+        &self,
+        _scenes: &super::planning::PlannedScenes,
+        kept: &super::planning::KeptTables,
+    ) -> super::planning::StageDecision {
+        match self.table_ref() {
+            Some(t) if kept(t).is_none() => super::planning::table_skipped(t),
+            _ => super::planning::StageDecision::Run {
+                reason: format!("bakes {}", self.scene),
+                def: Box::new(super::StageDef::BakeLightmaps(self.clone())),
+            },
+        }
+    }
     fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
         BakeLightmaps::run(self, id, ctx)
     }

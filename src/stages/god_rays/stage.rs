@@ -497,6 +497,22 @@ impl crate::stages::Stage for EpipolarShadows {
     fn scenes(&self, base_dir: &Path) -> Vec<std::path::PathBuf> {
         vec![self.scene_path(base_dir)]
     }
+    fn plan(
+        &self,
+        scenes: &crate::stages::planning::PlannedScenes,
+        _kept: &crate::stages::planning::KeptTables,
+    ) -> crate::stages::planning::StageDecision {
+        let def = crate::stages::StageDef::EpipolarShadows(self.clone());
+        crate::stages::planning::effect(def, "god rays", &self.scene, scenes, |sc| {
+            if super::EpiLight::from_scene(sc).is_none() {
+                Some("directional or spot light")
+            } else if super::EpiMedium::from_scene(sc).is_none() {
+                Some("homogeneous global medium")
+            } else {
+                None
+            }
+        })
+    }
     fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
         EpipolarShadows::run(self, id, ctx)
     }

@@ -556,6 +556,16 @@ impl crate::stages::Stage for ImageFogStage {
     fn scenes(&self, base_dir: &Path) -> Vec<std::path::PathBuf> {
         vec![self.scene_path(base_dir)]
     }
+    fn plan(
+        &self,
+        scenes: &crate::stages::planning::PlannedScenes,
+        _kept: &crate::stages::planning::KeptTables,
+    ) -> crate::stages::planning::StageDecision {
+        let def = crate::stages::StageDef::ImageFog(self.clone());
+        crate::stages::planning::effect(def, "image-space fog", &self.scene, scenes, |sc| {
+            super::FogMedium::from_scene(sc).is_none().then_some("global medium")
+        })
+    }
     fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
         ImageFogStage::run(self, id, ctx)
     }

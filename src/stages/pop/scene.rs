@@ -516,3 +516,27 @@ pub fn scattering_reference_scene(scene: &Scene, media: &SceneMedia) -> Scene {
     }
     s
 }
+
+/// What a scene lacks for POP (`PopRender` and its `PopPreset` table): a global medium that scatters
+/// forward (`g ≥ 0`), or a directional, point, spot or sphere light (rectilinear and radial grids) or a
+/// dome light (environment ordinates).
+pub fn lacks(sc: &Scene) -> Option<&'static str> {
+    let media = sc.media.iter().filter(|m| m.boundary == Boundary::Global).collect::<Vec<_>>();
+    if media.len() != 1 || media[0].g.iter().any(|g| *g < 0.0) {
+        Some("single forward-scattering global medium")
+    } else if sc.environment.is_none()
+        && !sc.lights.iter().any(|l| {
+            matches!(
+                l.kind,
+                LightKind::Directional { .. }
+                    | LightKind::Point { .. }
+                    | LightKind::Spot { .. }
+                    | LightKind::Sphere { .. }
+            )
+        })
+    {
+        Some("directional, point, spot, sphere or dome light")
+    } else {
+        None
+    }
+}

@@ -193,6 +193,19 @@ impl TranslucentRender {
         self.fields().scene_path(base_dir)
     }
 
+    /// What `scene` lacks for this stage (the planner leaves the stage out then): a refractive object
+    /// bounding a medium, or a point or sphere light.
+    pub fn lacks(&self, scene: &Scene) -> Option<&'static str> {
+        let bvh = crate::scene::bvh::SceneBvh::build(scene);
+        if crate::render::dielectric::find_object(scene, &bvh).is_none() {
+            Some("closed dielectric mesh bounding a medium")
+        } else if crate::render::dielectric::emitters(scene, self.light_radius).0.is_empty() {
+            Some("point or sphere light")
+        } else {
+            None
+        }
+    }
+
     /// Range checks.
     pub fn validate(&self) -> Vec<FieldIssue> {
         let mut v = self.fields().validate();
@@ -622,6 +635,27 @@ impl crate::stages::Stage for TranslucentRender {
     }
     fn scenes(&self, base_dir: &Path) -> Vec<PathBuf> {
         vec![self.scene_path(base_dir)]
+    }
+    fn plan(
+        &self,
+        scenes: &crate::stages::planning::PlannedScenes,
+        kept: &crate::stages::planning::KeptTables,
+    ) -> crate::stages::planning::StageDecision {
+        if kept(&self.table).is_none() {
+            return crate::stages::planning::table_skipped(&self.table);
+        }
+        // A lobe table the plan skips brackets none of the stage's materials, so holds none of them: the
+        // stage reads `table` for those and must not open a file this run did not write.
+        let mut def = self.clone();
+        def.lobe_tables.retain(|l| kept(l).is_some());
+        let def = crate::stages::StageDef::TranslucentRender(def);
+        crate::stages::planning::effect(def, "translucent media", &self.scene, scenes, |sc| self.lacks(sc))
+    }
+    fn lobe_materials(&self, scenes: &crate::stages::planning::PlannedScenes) -> Vec<String> {
+        if scenes.find(&self.scene).is_none() {
+            return Vec::new();
+        }
+        self.materials.iter().filter(|m| m.as_str() != "Scene").cloned().collect()
     }
     fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
         TranslucentRender::run(self, id, ctx)

@@ -538,6 +538,23 @@ impl crate::stages::Stage for PopRender {
     fn scenes(&self, base_dir: &Path) -> Vec<std::path::PathBuf> {
         vec![self.scene_path(base_dir)]
     }
+    fn plan(
+        &self,
+        scenes: &crate::stages::planning::PlannedScenes,
+        kept: &crate::stages::planning::KeptTables,
+    ) -> crate::stages::planning::StageDecision {
+        if kept(&self.table).is_none() {
+            return crate::stages::planning::table_skipped(&self.table);
+        }
+        let def = crate::stages::StageDef::PopRender(self.clone());
+        crate::stages::planning::effect(
+            def,
+            "principal-ordinates propagation",
+            &self.scene,
+            scenes,
+            super::scene::lacks,
+        )
+    }
     fn run(&self, id: &str, ctx: &StageContext) -> Result<StageOutcome, StageError> {
         PopRender::run(self, id, ctx)
     }
