@@ -183,20 +183,21 @@ fn zh_query_rows(
     def: &crate::tables::zh_response::ZhResponse,
     generated: &crate::tables::Generated,
 ) -> Result<Vec<BenchRow>, BenchError> {
+    use crate::physics::medium::HomogeneousMedium;
     use crate::physics::rng::StreamKey;
     use crate::physics::sh;
-    use crate::tables::zh_response::{Emitter, Medium, QueryOptions, Receiver, ZhResponseTable};
+    use crate::tables::zh_response::{Emitter, QueryOptions, Receiver, ZhResponseTable};
     let table = ZhResponseTable::from_arrays(def, &generated.arrays, &generated.values).map_err(BenchError::Variant)?;
     let (g_lo, g_hi) = (table.g[0], table.g[table.g.len() - 1]);
     let mut rows = Vec::new();
     for &profile in &table.emitters {
-        let queries: Vec<(Medium, Emitter, Receiver)> = (0..ZH_QUERIES as u64)
+        let queries: Vec<(HomogeneousMedium, Emitter, Receiver)> = (0..ZH_QUERIES as u64)
             .map(|i| {
                 let k = StreamKey { table: 0x9e37, cell: i };
                 let u = |dim| k.uniform(0, dim);
                 let sigma_t = 1.0;
                 let albedo = 0.5 + 0.5 * u(0);
-                let medium = Medium {
+                let medium = HomogeneousMedium {
                     sigma_s: albedo * sigma_t,
                     sigma_a: (1.0 - albedo) * sigma_t,
                     g: g_lo + (g_hi - g_lo) * u(1),

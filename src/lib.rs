@@ -34,7 +34,8 @@
 //! - [`render`]: the floor under the techniques: images, camera, G-buffer, luminance, optics, GPU context.
 //! - [`scene`]: glTF/USD import into one scene model, checks, BVH ray queries.
 //! - [`image_io`]: EXR and PNG output.
-//! - [`physics`]: phase functions and counter-based random streams (one home per concept).
+//! - [`physics`]: phase functions, counter-based random streams, spherical harmonics, the homogeneous
+//!   medium and the ZH and lobe transport generators (one home per concept).
 //! - [`reference`](mod@reference): independent high-precision references the tables are judged against.
 //! - [`report`]: error-against-run-time reports and plots.
 //! - [`validation`]: `voltab validate`, every stage against Mitsuba 3 (the independent reference).

@@ -6,7 +6,8 @@ mod common;
 use std::sync::OnceLock;
 
 use common::{tempdir, text, voltab};
-use voltab::tables::zh_response::{Emitter, Medium, QueryOptions, Receiver, ZhResponseTable};
+use voltab::physics::medium::HomogeneousMedium;
+use voltab::tables::zh_response::{Emitter, QueryOptions, Receiver, ZhResponseTable};
 
 /// A small table compiled once through the binary: (kept temp dir, table path).
 fn compiled() -> &'static (tempfile::TempDir, std::path::PathBuf) {
@@ -66,7 +67,7 @@ fn point_and_directional_match_the_library_and_the_analytic_direct_term() {
             let th = f64::to_radians(deg);
             let r = Receiver { position: [0.0; 3], normal: [th.sin(), 0.0, th.cos()] };
             let want = table
-                .irradiance(&Medium { sigma_s: s, sigma_a: a, g }, &make(dist), &r, &QueryOptions::default())
+                .irradiance(&HomogeneousMedium { sigma_s: s, sigma_a: a, g }, &make(dist), &r, &QueryOptions::default())
                 .unwrap();
             for (k, w) in
                 [("direct", want.direct), ("single", want.single), ("multiple", want.multiple), ("total", want.total)]
@@ -99,8 +100,9 @@ fn point_and_directional_match_the_library_and_the_analytic_direct_term() {
     let t = 30f64.to_radians();
     let e = Emitter::Area { intensity: 1.0, position: [0.0, 0.0, 1.2], normal: [t.sin(), 0.0, -t.cos()] };
     let r = Receiver { position: [0.0; 3], normal: [0.0, 0.0, 1.0] };
-    let want =
-        table.irradiance(&Medium { sigma_s: 0.9, sigma_a: 0.0, g: 0.5 }, &e, &r, &QueryOptions::default()).unwrap();
+    let want = table
+        .irradiance(&HomogeneousMedium { sigma_s: 0.9, sigma_a: 0.0, g: 0.5 }, &e, &r, &QueryOptions::default())
+        .unwrap();
     assert!((v["total"].as_f64().unwrap() - want.total).abs() <= 1e-12 * want.total);
     let direct = t.cos() * (-0.9f64 * 1.2).exp() / (1.2 * 1.2);
     assert!((v["direct"].as_f64().unwrap() - direct).abs() <= 1e-12 * direct);
@@ -150,8 +152,12 @@ fn only_the_needed_g_slices_are_loaded() {
     let t = ZhResponseTable::open(path, None, Some(&[0.25])).unwrap();
     let r = Receiver { position: [0.0; 3], normal: [0.0, 0.0, 1.0] };
     let e = Emitter::Point { intensity: 1.0, position: [0.0, 0.0, 1.0] };
-    assert!(t.irradiance(&Medium { sigma_s: 1.0, sigma_a: 0.0, g: 0.25 }, &e, &r, &QueryOptions::default()).is_ok());
-    let err =
-        t.irradiance(&Medium { sigma_s: 1.0, sigma_a: 0.0, g: -0.25 }, &e, &r, &QueryOptions::default()).unwrap_err();
+    assert!(
+        t.irradiance(&HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.25 }, &e, &r, &QueryOptions::default())
+            .is_ok()
+    );
+    let err = t
+        .irradiance(&HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: -0.25 }, &e, &r, &QueryOptions::default())
+        .unwrap_err();
     assert!(err.to_string().contains("not loaded"), "{err}");
 }

@@ -188,7 +188,8 @@ pub(super) fn inspect(file: &Path, all_chunks: bool) -> Result<()> {
 }
 
 pub(super) fn eval_zh(a: &EvalZh) -> Result<()> {
-    use voltab::tables::zh_response::{Emitter, EmitterProfile, Medium, QueryOptions, Receiver, ZhResponseTable};
+    use voltab::physics::medium::HomogeneousMedium;
+    use voltab::tables::zh_response::{Emitter, EmitterProfile, QueryOptions, Receiver, ZhResponseTable};
     let profile = match a.emitter {
         EvalEmitter::Point => EmitterProfile::Point,
         EvalEmitter::Directional => EmitterProfile::Directional,
@@ -210,7 +211,7 @@ pub(super) fn eval_zh(a: &EvalZh) -> Result<()> {
     if !(a.distance.is_finite() && a.distance >= 0.0) {
         bail!("--distance {} must be finite and >= 0 (metres)", a.distance);
     }
-    let medium = Medium { sigma_s: a.sigma_s, sigma_a: a.sigma_a, g: a.g };
+    let medium = HomogeneousMedium { sigma_s: a.sigma_s, sigma_a: a.sigma_a, g: a.g };
     let opts = QueryOptions {
         backscatter: a.backscatter,
         tail: !a.no_tail,

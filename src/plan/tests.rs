@@ -208,9 +208,10 @@ fn generate(def: &TableDef) -> crate::tables::Generated {
 /// the difference the bounce recursion leaves (orders ≥ 2 see the dropped far distances): 1.9e-8 measured.
 #[test]
 fn consumers_get_the_same_answers_from_pruned_tables() {
+    use crate::physics::medium::HomogeneousMedium;
     use crate::tables::ms_lobes::{LobeQuery, MsLobesTable};
     use crate::tables::phase_hg::PhaseHgTable;
-    use crate::tables::zh_response::{Emitter, Medium, QueryOptions, Receiver, ZhResponseTable};
+    use crate::tables::zh_response::{Emitter, QueryOptions, Receiver, ZhResponseTable};
 
     let dir = tempfile::tempdir().unwrap();
     let p = small_pipeline(dir.path());
@@ -267,7 +268,7 @@ fn consumers_get_the_same_answers_from_pruned_tables() {
         ZhResponseTable::from_arrays(&df, &zf.arrays, &zf.values).unwrap(),
         ZhResponseTable::from_arrays(&dp, &zp.arrays, &zp.values).unwrap(),
     );
-    let medium = Medium { sigma_s: 0.1, sigma_a: 0.01, g: 0.3 };
+    let medium = HomogeneousMedium { sigma_s: 0.1, sigma_a: 0.01, g: 0.3 };
     let opts = QueryOptions { backscatter: true, tail: true, similarity: false, max_bounce: None };
     let receiver = Receiver { position: [0.0; 3], normal: [0.0, 0.0, 1.0] };
     let mut worst = 0.0f64;

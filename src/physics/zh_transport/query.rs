@@ -2,7 +2,8 @@
 //! lengths in mean free paths) → irradiance in a real homogeneous medium, split into direct, single and
 //! multiple scattering.
 //!
-//! Input: a [`Response`], a [`Medium`] in scene units (1/m), the emitter strength (intensity in W/sr
+//! Input: a [`Response`], a [`HomogeneousMedium`] in scene units (1/m; its `g` is the one the response
+//! was computed for), the emitter strength (intensity in W/sr
 //! for a point emitter, irradiance in W/m² at the boundary for a directional one), the distance (or
 //! boundary depth) in metres and the cosine between the receiver normal and the light axis.
 //! Derivation (Sec. 4.3 with absorption): measuring lengths in mean free paths of the real medium,
@@ -14,16 +15,8 @@
 //! coefficient along the connecting segment, which is exact for the direct term.
 
 use super::{EmitterKind, Response};
+use crate::physics::medium::{HomogeneousMedium, MediumError};
 use crate::physics::sh;
-
-/// A homogeneous medium in scene units.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Medium {
-    /// Scattering coefficient σ_s (1/m), ≥ 0.
-    pub sigma_s: f64,
-    /// Absorption coefficient σ_a (1/m), ≥ 0.
-    pub sigma_a: f64,
-}
 
 /// Irradiance at a receiver split by scattering order (W/m²).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,8 +43,27 @@ pub fn effective_sigma(segments: &[(f64, f64)]) -> f64 {
     if length > 0.0 { segments.iter().map(|s| s.0 * s.1).sum::<f64>() / length } else { 0.0 }
 }
 
-fn finite_non_negative(name: &str, v: f64) -> Result<f64, String> {
-    if v.is_finite() && v >= 0.0 { Ok(v) } else { Err(format!("{name} = {v} must be finite and >= 0")) }
+/// A query argument outside its domain.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum SplitError {
+    /// The medium's coefficients.
+    #[error(transparent)]
+    Medium(#[from] MediumError),
+    /// `strength`, `distance` or `cos_n` is NaN, infinite or (for the first two) negative.
+    #[error("{name} = {value} must be finite{}", if *.name == "cos_n" { "" } else { " and >= 0" })]
+    Argument {
+        /// The argument's name.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// A point emitter on the receiver.
+    #[error("a point emitter at distance 0 has no defined irradiance")]
+    PointAtZero,
+}
+
+fn finite_non_negative(name: &'static str, value: f64) -> Result<f64, SplitError> {
+    if value.is_finite() && value >= 0.0 { Ok(value) } else { Err(SplitError::Argument { name, value }) }
 }
 
 impl Response {
@@ -65,21 +77,29 @@ impl Response {
 
     /// Irradiance in a real medium (see the module doc). `strength` is the point emitter's intensity
     /// (W/sr) or the directional emitter's boundary irradiance (W/m²); `distance` is the emitter
-    /// distance or boundary depth in metres. Errors name a non-finite or negative argument.
-    pub fn irradiance_in(&self, medium: &Medium, strength: f64, distance: f64, cos_n: f64) -> Result<Split, String> {
-        let sigma_s = finite_non_negative("sigma_s", medium.sigma_s)?;
-        let sigma_a = finite_non_negative("sigma_a", medium.sigma_a)?;
+    /// distance or boundary depth in metres.
+    ///
+    /// # Errors
+    /// The medium or argument outside its domain, or a point emitter at distance 0.
+    pub fn irradiance_in(
+        &self,
+        medium: &HomogeneousMedium,
+        strength: f64,
+        distance: f64,
+        cos_n: f64,
+    ) -> Result<Split, SplitError> {
+        let (sigma_s, _) = medium.checked()?;
         let strength = finite_non_negative("strength", strength)?;
         let distance = finite_non_negative("distance", distance)?;
         if !cos_n.is_finite() {
-            return Err(format!("cos_n = {cos_n} must be finite"));
+            return Err(SplitError::Argument { name: "cos_n", value: cos_n });
         }
         let cos = cos_n.clamp(-1.0, 1.0);
-        let sigma_t = sigma_s + sigma_a;
+        let sigma_t = medium.sigma_t();
         let dq = sigma_t * distance;
         let geometric = match self.kind {
             EmitterKind::Point if distance == 0.0 => {
-                return Err("a point emitter at distance 0 has no defined irradiance".into());
+                return Err(SplitError::PointAtZero);
             }
             EmitterKind::Point => strength / (distance * distance),
             EmitterKind::Directional => strength,
@@ -88,7 +108,7 @@ impl Response {
         if sigma_s == 0.0 || self.bounces.is_empty() {
             return Ok(Split { direct, single: 0.0, multiple: 0.0 });
         }
-        let albedo = sigma_s / sigma_t;
+        let albedo = medium.albedo();
         let scale = strength
             * match self.kind {
                 EmitterKind::Point => sigma_t * sigma_t,

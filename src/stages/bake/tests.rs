@@ -8,10 +8,11 @@ use std::sync::OnceLock;
 
 use super::transport::{MIN_DISTANCE, Transport, TransportOptions};
 use super::*;
+use crate::physics::medium::HomogeneousMedium;
 use crate::scene::fixtures::{cuboid, empty, medium, point_light};
 use crate::scene::{Boundary, Light, LightKind, Material, Mesh, Surface};
 use crate::tables::phase_hg::GValues;
-use crate::tables::zh_response::{Emitter, Medium as ZhMedium, QueryOptions, Receiver, ZhResponse, ZhResponseTable};
+use crate::tables::zh_response::{Emitter, QueryOptions, Receiver, ZhResponse, ZhResponseTable};
 
 /// A small table (all emitter profiles, g ∈ {0, 0.5}, 48 distances, B = 6), generated once.
 fn table() -> &'static ZhResponseTable {
@@ -106,7 +107,7 @@ fn full_mode_connection_equals_the_tables_answer_for_that_segment() {
     let e = tr.receiver([0.0; 3], UP, UP, 0).unwrap();
     let q = table()
         .irradiance(
-            &ZhMedium { sigma_s: 0.3, sigma_a: 0.05, g: 0.25 },
+            &HomogeneousMedium { sigma_s: 0.3, sigma_a: 0.05, g: 0.25 },
             &Emitter::Point { intensity: 1.0, position: [0.0, 2.0, 1.0] },
             &Receiver { position: [0.0; 3], normal: UP },
             &QueryOptions { backscatter: false, similarity: true, ..QueryOptions::default() },
@@ -346,7 +347,7 @@ fn light_outside_a_fog_box_is_attenuated_by_the_chord_only() {
         .unwrap();
     let q = table()
         .irradiance(
-            &ZhMedium { sigma_s: 0.1, sigma_a: 0.2 / 3.0, g: 0.0 },
+            &HomogeneousMedium { sigma_s: 0.1, sigma_a: 0.2 / 3.0, g: 0.0 },
             &Emitter::Point { intensity: 1.0, position: [0.0, 3.0, 0.0] },
             &Receiver { position: [0.0; 3], normal: UP },
             &QueryOptions { backscatter: false, similarity: true, ..QueryOptions::default() },

@@ -39,11 +39,12 @@ use glam::DVec3;
 
 use super::BakeMode;
 use super::lights::{BakeLights, Patch, Source, unit};
+use crate::physics::medium::HomogeneousMedium;
 use crate::physics::rng::{SampleStream, StreamKey};
 use crate::render::frame::frame;
 use crate::scene::bvh::{Hit, Ray, SceneBvh, optical_thickness};
 use crate::scene::{Boundary, Scene, Surface};
-use crate::tables::zh_response::{Emitter, Medium as ZhMedium, QueryError, QueryOptions, Receiver, ZhResponseTable};
+use crate::tables::zh_response::{Emitter, QueryError, QueryOptions, Receiver, ZhResponseTable};
 
 /// Closest a receiver gets to a point source \[m\] (caps the `1/d²`).
 pub const MIN_DISTANCE: f64 = 1e-3;
@@ -87,21 +88,13 @@ pub struct Estimate {
     pub rays: u64,
 }
 
-/// Effective medium of one channel along a segment.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Channel {
-    sigma_s: f64,
-    sigma_a: f64,
-    g: f64,
-}
-
 /// What lies along a segment.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Along {
     /// Transmittance per channel.
     transmittance: [f64; 3],
-    /// Effective coefficients per channel (all zero in vacuum).
-    channels: [Channel; 3],
+    /// Effective coefficients per channel along the segment (all zero in vacuum).
+    channels: [HomogeneousMedium; 3],
 }
 
 /// An irradiance estimate split by whether its terms contain scattered-light queries (those are made on
@@ -392,8 +385,7 @@ impl<'a> Transport<'a> {
             if ch.sigma_s <= 0.0 {
                 continue;
             }
-            let m = ZhMedium { sigma_s: ch.sigma_s, sigma_a: ch.sigma_a, g: ch.g };
-            let rad = table.radiance(&m, emitter, &receiver, &query)?;
+            let rad = table.radiance(&ch, emitter, &receiver, &query)?;
             for i in 0..PROBE_SH.min(rad.sh.len()) {
                 sh[c][i] += w * strength[c] * scatter_scale * rad.sh[i];
             }
@@ -578,8 +570,7 @@ impl<'a> Transport<'a> {
             if ch.sigma_s <= 0.0 {
                 continue;
             }
-            let m = ZhMedium { sigma_s: ch.sigma_s, sigma_a: ch.sigma_a, g: ch.g };
-            let irr = table.irradiance(&m, emitter, &receiver, &self.query)?;
+            let irr = table.irradiance(&ch, emitter, &receiver, &self.query)?;
             out[c] = irr.single + irr.multiple;
         }
         Ok(out)
@@ -614,7 +605,7 @@ impl<'a> Transport<'a> {
             return None;
         }
         let transmittance = tau_t.map(|t| (-t).exp());
-        let channels = [0, 1, 2].map(|c| Channel {
+        let channels = [0, 1, 2].map(|c| HomogeneousMedium {
             sigma_s: tau_s[c] / length,
             sigma_a: tau_a[c] / length,
             g: if tau_s[c] > 0.0 { (tau_g[c] / tau_s[c]).clamp(-0.999, 0.999) } else { 0.0 },

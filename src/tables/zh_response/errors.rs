@@ -73,7 +73,7 @@ fn compare(
     d: f64,
     reference: &(f64, Vec<f64>, Vec<f64>),
 ) -> Result<(f64, f64), String> {
-    let medium = Medium { sigma_s: 1.0, sigma_a: 0.0, g };
+    let medium = HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g };
     let opts = QueryOptions { backscatter: false, tail: false, similarity: false, max_bounce: None };
     let emitter = match profile {
         EmitterProfile::Point => Emitter::Point { intensity: 1.0, position: [0.0, 0.0, d] },

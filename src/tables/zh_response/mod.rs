@@ -39,13 +39,13 @@ use serde::{Deserialize, Serialize};
 
 pub use errors::{REPORT_DISTANCES, REPORT_WALK_PHOTONS, SIDECAR_WALK_PHOTONS, WALK_ALBEDO, walk_reference};
 pub use table::{
-    Emitter, Irradiance, Medium, QueryError, QueryOptions, Radiance, Receiver, ZhReadError, ZhResponseTable,
-    array_names,
+    Emitter, Irradiance, QueryError, QueryOptions, Radiance, Receiver, ZhReadError, ZhResponseTable, array_names,
 };
 
 use super::phase_hg::{Element, GValues};
 use super::{ErrorEstimate, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
 use crate::container::{ArrayDesc, Axis};
+use crate::physics::medium::HomogeneousMedium;
 use crate::physics::zh_transport::{self, EmitterKind, ResponseConfig, tail};
 use crate::reference::walk;
 
@@ -635,7 +635,7 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
                         } else {
                             QueryOptions::default()
                         };
-                        let medium = Medium { sigma_s, sigma_a, g };
+                        let medium = HomogeneousMedium { sigma_s, sigma_a, g };
                         let value = match table.irradiance(&medium, &emitter, &receiver, &opts) {
                             Ok(x) if [x.direct, x.single, x.multiple, x.tail].iter().all(|p| *p >= 0.0) => x.total,
                             _ => f64::NAN,
@@ -655,7 +655,7 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
         if profile == EmitterProfile::Point {
             let emitter = Emitter::Point { intensity: 1.0, position: [0.0, 0.0, 1e-300] };
             let receiver = Receiver { position: [0.0; 3], normal: [0.0, 0.0, 1.0] };
-            let medium = Medium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 };
+            let medium = HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 };
             let value = match table.irradiance(&medium, &emitter, &receiver, &QueryOptions::default()) {
                 Err(QueryError::Invalid(m)) if m.contains("overflowed") || m.contains("at the point light") => 1.0,
                 _ => f64::NAN,
@@ -677,7 +677,7 @@ pub fn stability_rows() -> Vec<crate::stability::Row> {
             EmitterProfile::Area => 0.8 * (-0.5 * d).exp() * cos_n / (d * d),
         };
         let receiver = Receiver { position: [0.0; 3], normal: [0.8, 0.0, cos_n] };
-        let medium = Medium { sigma_s: 0.0, sigma_a: 0.5, g: 0.0 };
+        let medium = HomogeneousMedium { sigma_s: 0.0, sigma_a: 0.5, g: 0.0 };
         let value =
             table.irradiance(&medium, &emitter, &receiver, &QueryOptions::default()).map_or(f64::NAN, |x| x.total);
         v.push(row(

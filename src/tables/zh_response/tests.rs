@@ -7,7 +7,6 @@ use std::sync::OnceLock;
 
 use super::*;
 use crate::physics::sh;
-use crate::physics::zh_transport::query::Medium as QMedium;
 use crate::physics::zh_transport::tail;
 
 /// A small table (g ∈ {0, 0.5}, 48 distances, 6 nodes per panel, B = 10), generated once.
@@ -97,12 +96,12 @@ fn remapping_matches_the_transport_query_side() {
             for node in [ds[10], ds[25], ds[40]] {
                 let dist = node / (sigma_s + sigma_a);
                 for cos_n in [1.0, 0.3, -0.6] {
-                    let want = r.irradiance_in(&QMedium { sigma_s, sigma_a }, 2.5, dist, cos_n).unwrap();
+                    let m = HomogeneousMedium { sigma_s, sigma_a, g: 0.5 };
+                    let want = r.irradiance_in(&m, 2.5, dist, cos_n).unwrap();
                     let emitter = match profile {
                         EmitterProfile::Point => Emitter::Point { intensity: 2.5, position: [0.0, 0.0, dist] },
                         _ => Emitter::Directional { irradiance: 2.5, toward_light: [0.0, 0.0, 1.0], depth: dist },
                     };
-                    let m = Medium { sigma_s, sigma_a, g: 0.5 };
                     let got = table.irradiance(&m, &emitter, &receiver(cos_n), &PLAIN).unwrap();
                     for (name, x, y) in [
                         ("direct", got.direct, want.direct),
@@ -123,7 +122,7 @@ fn remapping_matches_the_transport_query_side() {
 #[test]
 fn direct_term_is_analytic_and_vacuum_leaves_only_it() {
     let (_, _, table) = small();
-    let m = Medium { sigma_s: 0.0, sigma_a: 0.7, g: 0.0 };
+    let m = HomogeneousMedium { sigma_s: 0.0, sigma_a: 0.7, g: 0.0 };
     let d = 1.9;
     let cos_n: f64 = 0.8;
     let p = table.irradiance(&m, &point(d), &receiver(cos_n), &QueryOptions::default()).unwrap();
@@ -135,8 +134,9 @@ fn direct_term_is_analytic_and_vacuum_leaves_only_it() {
     assert!((s.direct - want).abs() <= 1e-15 * want);
     assert_eq!(s.total, s.direct);
     // σ_s → 0: the scattered parts vanish linearly (single ∝ σ_s), nothing jumps.
-    let tiny =
-        |s: f64| table.irradiance(&Medium { sigma_s: s, sigma_a: 0.7, g: 0.0 }, &point(d), &receiver(1.0), &PLAIN);
+    let tiny = |s: f64| {
+        table.irradiance(&HomogeneousMedium { sigma_s: s, sigma_a: 0.7, g: 0.0 }, &point(d), &receiver(1.0), &PLAIN)
+    };
     let (a, b) = (tiny(1e-6).unwrap().single, tiny(2e-6).unwrap().single);
     assert!(a > 0.0 && ((b / a) - 2.0).abs() < 1e-4, "{a} {b}");
 }
@@ -144,7 +144,7 @@ fn direct_term_is_analytic_and_vacuum_leaves_only_it() {
 #[test]
 fn appendix_a_shading_matches_full_sh_rotation_and_quadrature() {
     let (_, _, table) = small();
-    let m = Medium { sigma_s: 0.8, sigma_a: 0.2, g: 0.25 };
+    let m = HomogeneousMedium { sigma_s: 0.8, sigma_a: 0.2, g: 0.25 };
     let e = Emitter::Point { intensity: 1.0, position: [0.3, -0.4, 1.1] };
     for normal in [[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [-0.3, 0.9, 0.1], [0.2, 0.1, -1.0]] {
         let r = Receiver { position: [0.1, 0.0, -0.2], normal };
@@ -189,7 +189,9 @@ fn real_medium_with_absorption_and_g_interpolation_matches_the_walk() {
                 _ => walk::Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, 1.0], depth: 1.0 },
             };
             let w = walk::irradiance(&em, &medium, [0.0, 0.0, 1.0], &walk::WalkConfig::new(1 << 17, 10, 11)).unwrap();
-            let got = table.irradiance(&Medium { sigma_s: 1.5, sigma_a: 0.5, g }, &e, &receiver(1.0), &PLAIN).unwrap();
+            let got = table
+                .irradiance(&HomogeneousMedium { sigma_s: 1.5, sigma_a: 0.5, g }, &e, &receiver(1.0), &PLAIN)
+                .unwrap();
             let single = w.orders[0];
             let multi: f64 = w.orders[1..].iter().map(|o| o.mean).sum();
             let multi_err: f64 = w.orders[1..].iter().map(|o| o.std_error * o.std_error).sum::<f64>().sqrt();
@@ -210,11 +212,11 @@ fn extreme_inputs_are_finite_non_negative_and_continuous() {
     let ok =
         |x: &Irradiance| [x.direct, x.single, x.multiple, x.tail, x.total].iter().all(|v| v.is_finite() && *v >= 0.0);
     let media = [
-        Medium { sigma_s: 1.0, sigma_a: 0.0, g: 0.5 },         // albedo exactly 1
-        Medium { sigma_s: 1e-3, sigma_a: 1e3, g: 0.0 },        // σ_a ≫ σ_s
-        Medium { sigma_s: 1e-12, sigma_a: 0.0, g: 0.25 },      // σ_s → 0
-        Medium { sigma_s: 1e4, sigma_a: 0.0, g: 0.5 },         // very thick
-        Medium { sigma_s: 1.0, sigma_a: 0.0, g: 0.5 - 1e-12 }, // at a slice boundary
+        HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.5 }, // albedo exactly 1
+        HomogeneousMedium { sigma_s: 1e-3, sigma_a: 1e3, g: 0.0 }, // σ_a ≫ σ_s
+        HomogeneousMedium { sigma_s: 1e-12, sigma_a: 0.0, g: 0.25 }, // σ_s → 0
+        HomogeneousMedium { sigma_s: 1e4, sigma_a: 0.0, g: 0.5 }, // very thick
+        HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.5 - 1e-12 }, // at a slice boundary
     ];
     for m in media {
         for d in [1e-12, 1e-6, 0.01, 1.0, 50.0, 1e3, 1e12] {
@@ -229,7 +231,7 @@ fn extreme_inputs_are_finite_non_negative_and_continuous() {
         }
     }
     // Beyond the table (64 mfp): decays, never clamps upward.
-    let m = Medium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 };
+    let m = HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 };
     let at = |d: f64| table.irradiance(&m, &point(d), &receiver(1.0), &PLAIN).unwrap().single;
     assert!(at(70.0) < at(64.0) && at(100.0) < at(70.0) && at(1e3) == 0.0);
     // Continuous in d across nodes and the last node, and in g across the slice boundary.
@@ -239,7 +241,10 @@ fn extreme_inputs_are_finite_non_negative_and_continuous() {
         assert!((a - b).abs() <= 1e-6 * a.max(1e-300), "jump at d = {node}: {a} vs {b}");
     }
     let gq = |g: f64| {
-        table.irradiance(&Medium { sigma_s: 1.0, sigma_a: 0.0, g }, &point(1.0), &receiver(1.0), &PLAIN).unwrap().single
+        table
+            .irradiance(&HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g }, &point(1.0), &receiver(1.0), &PLAIN)
+            .unwrap()
+            .single
     };
     assert!((gq(0.5 - 1e-10) - gq(0.5)).abs() <= 1e-8 * gq(0.5));
     // Receiver inside the back-scatter shift (closer to the light than ε = 0.125 mfp): finite, continuous.
@@ -258,12 +263,16 @@ fn extreme_inputs_are_finite_non_negative_and_continuous() {
 #[test]
 fn bad_queries_are_errors_naming_the_problem() {
     let (_, _, table) = small();
-    let m = Medium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 };
-    let err = |m: Medium, e: Emitter, r: Receiver| table.irradiance(&m, &e, &r, &PLAIN).unwrap_err().to_string();
-    assert!(err(Medium { g: 0.7, ..m }, point(1.0), receiver(1.0)).contains("outside the table's g range [0, 0.5]"));
-    assert!(err(Medium { g: -0.1, ..m }, point(1.0), receiver(1.0)).contains("g range"));
-    assert!(err(Medium { sigma_s: -1.0, ..m }, point(1.0), receiver(1.0)).contains("sigma_s"));
-    assert!(err(Medium { sigma_a: f64::NAN, ..m }, point(1.0), receiver(1.0)).contains("sigma_a"));
+    let m = HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 };
+    let err =
+        |m: HomogeneousMedium, e: Emitter, r: Receiver| table.irradiance(&m, &e, &r, &PLAIN).unwrap_err().to_string();
+    assert!(
+        err(HomogeneousMedium { g: 0.7, ..m }, point(1.0), receiver(1.0))
+            .contains("outside the table's g range [0, 0.5]")
+    );
+    assert!(err(HomogeneousMedium { g: -0.1, ..m }, point(1.0), receiver(1.0)).contains("g range"));
+    assert!(err(HomogeneousMedium { sigma_s: -1.0, ..m }, point(1.0), receiver(1.0)).contains("sigma_s"));
+    assert!(err(HomogeneousMedium { sigma_a: f64::NAN, ..m }, point(1.0), receiver(1.0)).contains("sigma_a"));
     assert!(err(m, point(0.0), receiver(1.0)).contains("at the point light"));
     assert!(err(m, point(1.0), Receiver { position: [0.0; 3], normal: [0.0; 3] }).contains("normal"));
     let e = Emitter::Directional { irradiance: 1.0, toward_light: [0.0; 3], depth: 1.0 };
@@ -377,7 +386,7 @@ fn tail_closes_the_total_in_a_thick_medium() {
     let medium = walk::Medium { sigma_s, sigma_a: 0.01, g: 0.0 };
     let em = walk::Emitter::Point { intensity: 1.0, position: [0.0, 0.0, 4.0] };
     let w = walk::irradiance(&em, &medium, [0.0, 0.0, 1.0], &walk::WalkConfig::new(1 << 14, 10, 3)).unwrap();
-    let m = Medium { sigma_s, sigma_a: 0.01, g: 0.0 };
+    let m = HomogeneousMedium { sigma_s, sigma_a: 0.01, g: 0.0 };
     let with = table.irradiance(&m, &point(4.0), &receiver(1.0), &QueryOptions::default()).unwrap();
     let without = table.irradiance(&m, &point(4.0), &receiver(1.0), &PLAIN).unwrap();
     println!(
@@ -399,7 +408,7 @@ fn tail_closes_the_total_in_a_thick_medium() {
 fn similarity_relation_holds_where_light_is_diffuse() {
     let (_, _, table) = small();
     let g = 0.5;
-    let m = Medium { sigma_s: 0.99, sigma_a: 0.01, g };
+    let m = HomogeneousMedium { sigma_s: 0.99, sigma_a: 0.01, g };
     let em = walk::Emitter::Point { intensity: 1.0, position: [0.0, 0.0, 6.0] };
     let medium = walk::Medium { sigma_s: 0.99, sigma_a: 0.01, g };
     let w = walk::irradiance(&em, &medium, [0.0, 0.0, 1.0], &walk::WalkConfig::new(1 << 14, 10, 9)).unwrap();
@@ -414,7 +423,7 @@ fn similarity_relation_holds_where_light_is_diffuse() {
     assert!((exact.total - w.total.mean).abs() <= 0.05 * w.total.mean + 4.0 * w.total.std_error);
     assert_eq!(got.single, exact.single, "single scattering always uses the true g");
     // Thin and absorbing: the documented failure of the relation.
-    let m = Medium { sigma_s: 1.5, sigma_a: 0.5, g };
+    let m = HomogeneousMedium { sigma_s: 1.5, sigma_a: 0.5, g };
     let opts = QueryOptions { similarity: true, ..PLAIN };
     let thin = table.irradiance(&m, &point(1.0), &receiver(1.0), &opts).unwrap().multiple;
     let exact = table.irradiance(&m, &point(1.0), &receiver(1.0), &PLAIN).unwrap().multiple;
@@ -450,7 +459,7 @@ fn area_query_matches_the_canonical_response_in_any_frame() {
     let (def, table, canon) = small_area();
     let ds = def.distance_axis().values_vec();
     let resp = &canon[0];
-    let m = Medium { sigma_s: 1.0, sigma_a: 0.0, g: 0.5 };
+    let m = HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.5 };
     let x = [0.3, -1.2, 0.7];
     for &d in &[ds[5], ds[15], ds[25]] {
         for (dir, ne) in [
@@ -502,7 +511,8 @@ fn area_emitter_in_a_real_medium_matches_the_walk() {
         let medium = walk::Medium { sigma_s: 1.5, sigma_a: 0.5, g };
         let w = walk::irradiance(&em, &medium, [0.0, 0.0, 1.0], &walk::WalkConfig::new(1 << 17, 4, 21)).unwrap();
         let e = Emitter::Area { intensity: 1.0, position: [0.0, 0.0, 1.0], normal: ne };
-        let got = table.irradiance(&Medium { sigma_s: 1.5, sigma_a: 0.5, g }, &e, &receiver(1.0), &PLAIN).unwrap();
+        let got =
+            table.irradiance(&HomogeneousMedium { sigma_s: 1.5, sigma_a: 0.5, g }, &e, &receiver(1.0), &PLAIN).unwrap();
         let single = w.orders[0];
         let multi: f64 = w.orders[1..].iter().map(|o| o.mean).sum();
         println!(

@@ -12,7 +12,7 @@ fn response(kind: EmitterKind, g: f64, bounces: usize) -> Response {
 #[test]
 fn canonical_medium_is_the_identity() {
     let r = response(EmitterKind::Point, 0.3, 3);
-    let s = r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, 1.7, 0.4).unwrap();
+    let s = r.irradiance_in(&HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.3 }, 1.0, 1.7, 0.4).unwrap();
     let (d, single, multiple) = r.irradiance(1.7, 0.4);
     assert!((s.direct - d).abs() <= 1e-15 * d && (s.single - single).abs() <= 1e-15 * single);
     assert!((s.multiple - multiple).abs() <= 1e-14 * multiple);
@@ -34,7 +34,8 @@ fn remapped_query_matches_the_walk_in_a_real_medium() {
         for cos_n in [1.0, 0.0] {
             let normal = [(1.0f64 - cos_n * cos_n).sqrt(), 0.0, cos_n];
             let w = walk::irradiance(&emitter, &medium, normal, &walk::WalkConfig::new(200_000, 6, 11)).unwrap();
-            let q = r.irradiance_in(&Medium { sigma_s: 2.0, sigma_a: 0.5 }, 3.0, 0.6, cos_n).unwrap();
+            let q =
+                r.irradiance_in(&HomogeneousMedium { sigma_s: 2.0, sigma_a: 0.5, g: 0.5 }, 3.0, 0.6, cos_n).unwrap();
             assert!((q.direct - w.direct).abs() <= 1e-12 * w.direct.max(1e-300), "{kind:?} direct");
             let single = w.orders[0];
             let err = (q.single - single.mean).abs();
@@ -60,24 +61,31 @@ fn remapped_query_matches_the_walk_in_a_real_medium() {
 fn limits_and_bad_input() {
     let r = response(EmitterKind::Point, 0.0, 2);
     // No scattering: only the attenuated direct term remains.
-    let s = r.irradiance_in(&Medium { sigma_s: 0.0, sigma_a: 2.0 }, 1.0, 0.5, 1.0).unwrap();
+    let s = r.irradiance_in(&HomogeneousMedium { sigma_s: 0.0, sigma_a: 2.0, g: 0.0 }, 1.0, 0.5, 1.0).unwrap();
     assert_eq!((s.single, s.multiple), (0.0, 0.0));
     assert!((s.direct - 4.0 * (-1.0f64).exp()).abs() < 1e-15);
     // Vacuum: inverse-square law, nothing scattered.
-    let s = r.irradiance_in(&Medium { sigma_s: 0.0, sigma_a: 0.0 }, 2.0, 2.0, 0.5).unwrap();
+    let s = r.irradiance_in(&HomogeneousMedium { sigma_s: 0.0, sigma_a: 0.0, g: 0.0 }, 2.0, 2.0, 0.5).unwrap();
     assert_eq!(s, Split { direct: 0.25, single: 0.0, multiple: 0.0 });
     // σ_a ≫ σ_s: everything finite, non-negative, and scattering tiny.
-    let s = r.irradiance_in(&Medium { sigma_s: 1e-6, sigma_a: 1e3 }, 1.0, 0.01, -0.3).unwrap();
+    let s = r.irradiance_in(&HomogeneousMedium { sigma_s: 1e-6, sigma_a: 1e3, g: 0.0 }, 1.0, 0.01, -0.3).unwrap();
     assert!(s.total().is_finite() && s.single >= 0.0 && s.multiple >= 0.0 && s.direct == 0.0);
     // Far beyond the table: exponential tail, finite and below the nearer value.
-    let far = r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, 500.0, 1.0).unwrap();
-    let near = r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, 30.0, 1.0).unwrap();
+    let far = r.irradiance_in(&HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 }, 1.0, 500.0, 1.0).unwrap();
+    let near = r.irradiance_in(&HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 }, 1.0, 30.0, 1.0).unwrap();
     assert!(far.total().is_finite() && far.total() <= near.total());
     for bad in [f64::NAN, -1.0, f64::INFINITY] {
-        assert!(r.irradiance_in(&Medium { sigma_s: bad, sigma_a: 0.0 }, 1.0, 1.0, 1.0).is_err());
-        assert!(r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, bad, 1.0).is_err());
+        assert!(r.irradiance_in(&HomogeneousMedium { sigma_s: bad, sigma_a: 0.0, g: 0.0 }, 1.0, 1.0, 1.0).is_err());
+        assert!(r.irradiance_in(&HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 }, 1.0, bad, 1.0).is_err());
     }
-    assert!(r.irradiance_in(&Medium { sigma_s: 1.0, sigma_a: 0.0 }, 1.0, 0.0, 1.0).is_err());
+    let unit = HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g: 0.0 };
+    assert_eq!(r.irradiance_in(&unit, 1.0, 0.0, 1.0), Err(SplitError::PointAtZero));
+    let e = r.irradiance_in(&unit, 1.0, 1.0, f64::NAN).unwrap_err();
+    assert_eq!(e.to_string(), "cos_n = NaN must be finite");
+    let e = r.irradiance_in(&unit, -2.0, 1.0, 1.0).unwrap_err();
+    assert_eq!(e.to_string(), "strength = -2 must be finite and >= 0");
+    let e = r.irradiance_in(&HomogeneousMedium { g: 1.0, ..unit }, 1.0, 1.0, 1.0).unwrap_err();
+    assert_eq!(e, SplitError::Medium(MediumError::G(1.0)));
 }
 
 /// Sec. 4.4: the effective coefficient reproduces the transmittance of piecewise media exactly.

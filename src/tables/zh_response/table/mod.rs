@@ -1,7 +1,7 @@
 //! The consumer side of `ZhResponse` (dubouchet2019 Sec. 4.3–4.5, 5.1–5.2, Appendix A): a loaded table
 //! (all or some g slices and emitter profiles) and the queries a lightmap baker makes.
 //!
-//! **Input → output.** A `.vtab` (only the needed g slices are decompressed), a [`Medium`] (σ_s, σ_a, g
+//! **Input → output.** A `.vtab` (only the needed g slices are decompressed), a [`HomogeneousMedium`] (σ_s, σ_a, g
 //! in scene units; call once per colour channel), an [`Emitter`] and a [`Receiver`] → the irradiance on
 //! the receiver split into direct / single / multiple (`b ≥ 2`, of which `tail` is the part from
 //! `b > B` when a tail is tabulated) / total ([`ZhResponseTable::irradiance`]), or the incident scattered radiance as a ZH lobe and as world
@@ -39,6 +39,7 @@ use glam::DVec3;
 
 use super::{EmitterProfile, TAIL_ALBEDOS, ZhResponse, ZhResponseRaw};
 use crate::container::{ArrayDesc, ArrayValues};
+use crate::physics::medium::HomogeneousMedium;
 use crate::physics::sh;
 use crate::physics::zh_transport::area::{AreaEntry, AreaResponse};
 use crate::physics::zh_transport::tail;
@@ -47,7 +48,7 @@ use crate::tables::TableDef;
 mod query;
 mod slice;
 
-pub use query::{Emitter, Irradiance, Medium, QueryError, QueryOptions, Radiance, Receiver};
+pub use query::{Emitter, Irradiance, QueryError, QueryOptions, Radiance, Receiver};
 use slice::{Loc, Slice};
 
 /// Array names of a table with definition `def`, in file order.
@@ -121,16 +122,6 @@ fn invalid(msg: String) -> QueryError {
 
 fn finite_non_negative(name: &str, v: f64) -> Result<f64, QueryError> {
     if v.is_finite() && v >= 0.0 { Ok(v) } else { Err(invalid(format!("{name} = {v} must be finite and >= 0"))) }
-}
-
-/// `(σ_s, σ_a)` of a medium whose coefficients are finite and ≥ 0 and whose g lies in (−1, 1).
-fn check_medium(medium: &Medium) -> Result<(f64, f64), QueryError> {
-    let sigma_s = finite_non_negative("sigma_s", medium.sigma_s)?;
-    let sigma_a = finite_non_negative("sigma_a", medium.sigma_a)?;
-    if !(medium.g.is_finite() && medium.g.abs() < 1.0) {
-        return Err(invalid(format!("g = {} must lie in (-1, 1)", medium.g)));
-    }
-    Ok((sigma_s, sigma_a))
 }
 
 /// `v / |v|` for a finite non-zero `v`, else an error naming `name`.
@@ -508,13 +499,13 @@ impl ZhResponseTable {
     /// The scattered parts as ZH lobes about one axis, with the direct irradiance and the geometry.
     fn lobes(
         &self,
-        medium: &Medium,
+        medium: &HomogeneousMedium,
         emitter: &Emitter,
         receiver: &Receiver,
         opts: &QueryOptions,
         (single, multiple, tail): (&mut [f64], &mut [f64], &mut [f64; 2]),
     ) -> Result<(f64, DVec3, DVec3), QueryError> {
-        let (sigma_s, sigma_a) = check_medium(medium)?;
+        let (sigma_s, sigma_a) = medium.checked()?;
         let x = finite3("receiver position", receiver.position)?;
         let n = unit("receiver normal", receiver.normal)?;
         let profile = emitter.profile();
@@ -597,7 +588,7 @@ impl ZhResponseTable {
     /// axis angle turns from the light axis toward the tangential part of the patch normal. No tail.
     fn area_lobes(
         &self,
-        medium: &Medium,
+        medium: &HomogeneousMedium,
         emitter: &Emitter,
         receiver: &Receiver,
         opts: &QueryOptions,
@@ -606,7 +597,7 @@ impl ZhResponseTable {
         let Emitter::Area { intensity, position, normal } = *emitter else {
             return Err(invalid("internal: not an area emitter".into()));
         };
-        let (sigma_s, sigma_a) = check_medium(medium)?;
+        let (sigma_s, sigma_a) = medium.checked()?;
         let intensity = finite_non_negative("intensity", intensity)?;
         let p = finite3("emitter position", position)?;
         let ne = unit("emitter normal", normal)?;
@@ -696,7 +687,7 @@ impl ZhResponseTable {
     /// away). Errors name the offending argument, a g outside the table, or a slice not loaded.
     pub fn irradiance(
         &self,
-        medium: &Medium,
+        medium: &HomogeneousMedium,
         emitter: &Emitter,
         receiver: &Receiver,
         opts: &QueryOptions,
@@ -741,7 +732,7 @@ impl ZhResponseTable {
     /// cosine. The direct light is not included (it is a delta for a point light).
     pub fn radiance(
         &self,
-        medium: &Medium,
+        medium: &HomogeneousMedium,
         emitter: &Emitter,
         receiver: &Receiver,
         opts: &QueryOptions,

@@ -3,6 +3,7 @@
 //! and the errors of a query the table cannot answer.
 
 use super::*;
+use crate::physics::medium::MediumError;
 
 /// A query the table cannot answer.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -11,6 +12,9 @@ pub enum QueryError {
     /// An argument is out of its domain.
     #[error("{0}")]
     Invalid(String),
+    /// The medium's coefficients are outside their domain.
+    #[error(transparent)]
+    Medium(#[from] MediumError),
     /// The medium's g lies outside the tabulated slices.
     #[error("g = {g} is outside the table's g range [{min}, {max}]; add it to the table's g list")]
     GOutOfRange {
@@ -24,17 +28,6 @@ pub enum QueryError {
     /// The table (or the loaded part) lacks what the query needs.
     #[error("{0}")]
     NotLoaded(String),
-}
-
-/// A homogeneous medium (or the effective coefficients along a segment), scene units.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Medium {
-    /// Scattering coefficient σ_s (1/m), finite, ≥ 0.
-    pub sigma_s: f64,
-    /// Absorption coefficient σ_a (1/m), finite, ≥ 0.
-    pub sigma_a: f64,
-    /// HG mean cosine, within the table's g range.
-    pub g: f64,
 }
 
 /// A light, scene units.

@@ -1,0 +1,72 @@
+//! One colour channel of a homogeneous participating medium: the coefficients every table query and
+//! method takes.
+//!
+//! **Input → output.** Scattering and absorption coefficients σ_s, σ_a (1/m) and the HG mean cosine g
+//! → a checked [`HomogeneousMedium`], its extinction σ_t = σ_s + σ_a and single-scattering albedo
+//! α = σ_s/σ_t (the canonical-medium remapping of dubouchet2019 Sec. 4.3: lengths in mean free paths
+//! of the real medium turn it into the tabulated σ_t = 1 medium with albedo α).
+//!
+//! The ZH response tables (`tables::zh_response`), their generator's own query
+//! (`physics::zh_transport::query`) and the lightmap bake (`stages::bake`, the effective medium along a
+//! segment, dubouchet2019 Sec. 4.4) all read this one description. Scene media (per-channel, with a
+//! density field and a boundary) are `scene::Medium`; the path-tracing references keep their own
+//! (`reference::walk::Medium`) so that they share no code with the methods they judge.
+
+/// A medium's coefficients are outside their domain.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum MediumError {
+    /// σ_s or σ_a is negative, NaN or infinite.
+    #[error("{name} = {value} must be finite and >= 0")]
+    Coefficient {
+        /// `"sigma_s"` or `"sigma_a"`.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// g is NaN or `|g| ≥ 1`.
+    #[error("g = {0} must lie in (-1, 1)")]
+    G(f64),
+}
+
+/// One channel of a homogeneous medium (or the effective coefficients along a segment), scene units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HomogeneousMedium {
+    /// Scattering coefficient σ_s (1/m), finite, ≥ 0.
+    pub sigma_s: f64,
+    /// Absorption coefficient σ_a (1/m), finite, ≥ 0.
+    pub sigma_a: f64,
+    /// HG mean cosine, in (−1, 1).
+    pub g: f64,
+}
+
+impl HomogeneousMedium {
+    /// `(σ_s, σ_a)` when both are finite and ≥ 0 and g lies in (−1, 1).
+    ///
+    /// # Errors
+    /// The first coefficient outside its domain, σ_s before σ_a before g.
+    pub fn checked(&self) -> Result<(f64, f64), MediumError> {
+        for (name, value) in [("sigma_s", self.sigma_s), ("sigma_a", self.sigma_a)] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(MediumError::Coefficient { name, value });
+            }
+        }
+        if !(self.g.is_finite() && self.g.abs() < 1.0) {
+            return Err(MediumError::G(self.g));
+        }
+        Ok((self.sigma_s, self.sigma_a))
+    }
+
+    /// Extinction σ_t = σ_s + σ_a (1/m).
+    pub fn sigma_t(&self) -> f64 {
+        self.sigma_s + self.sigma_a
+    }
+
+    /// Single-scattering albedo σ_s/σ_t; 0 for a medium that neither scatters nor absorbs.
+    pub fn albedo(&self) -> f64 {
+        let sigma_t = self.sigma_t();
+        if sigma_t > 0.0 { self.sigma_s / sigma_t } else { 0.0 }
+    }
+}
+
+#[cfg(test)]
+mod tests;
