@@ -4,7 +4,11 @@
 //! **Input → output.** Scattering and absorption coefficients σ_s, σ_a (1/m) and the HG mean cosine g
 //! → a checked [`HomogeneousMedium`], its extinction σ_t = σ_s + σ_a and single-scattering albedo
 //! α = σ_s/σ_t (the canonical-medium remapping of dubouchet2019 Sec. 4.3: lengths in mean free paths
-//! of the real medium turn it into the tabulated σ_t = 1 medium with albedo α).
+//! of the real medium turn it into the tabulated σ_t = 1 medium with albedo α); an extinction and a
+//! length → the extinguished fraction 1 − e^{−σ_t L} ([`extinguished`]) and its inverse, the
+//! free-flight distance ([`free_flight`]) that samples e^{−σ_t t} (truncated to [0, L] when the
+//! fraction drawn is below `extinguished(σ_t, L)`): the distance sampling of wang2018's light and
+//! camera samples (Sec. 4.1) and of the lobe generator's walks (Sec. 5.2).
 //!
 //! The ZH response tables (`tables::zh_response`), their generator's own query
 //! (`physics::zh_transport::query`) and the lightmap bake (`stages::bake`, the effective medium along a
@@ -66,6 +70,20 @@ impl HomogeneousMedium {
         let sigma_t = self.sigma_t();
         if sigma_t > 0.0 { self.sigma_s / sigma_t } else { 0.0 }
     }
+}
+
+/// The fraction of a beam extinguished over `length`, `1 − e^{−σ_t·length}`, without cancellation
+/// for small `σ_t·length`. In `[0, 1]` for `σ_t, length ≥ 0`; NaN only for NaN input.
+pub fn extinguished(sigma_t: f64, length: f64) -> f64 {
+    -(-sigma_t * length).exp_m1()
+}
+
+/// The distance at which the extinguished fraction reaches `mass`, `−ln(1 − mass)/σ_t`: the inverse of
+/// [`extinguished`]. A `mass` uniform in `[0, 1)` samples the free flight `σ_t e^{−σ_t t}`; uniform in
+/// `[0, extinguished(σ_t, L))` it samples the flight truncated to `[0, L]`. `+∞` at `mass = 1` or
+/// `σ_t = 0` with `mass > 0`.
+pub fn free_flight(mass: f64, sigma_t: f64) -> f64 {
+    -(-mass).ln_1p() / sigma_t
 }
 
 #[cfg(test)]

@@ -49,6 +49,7 @@ use glam::DVec3;
 pub use closure::{collision_moments, decay_rate, remainder};
 
 use crate::physics::hg;
+use crate::physics::medium::free_flight;
 use crate::physics::rng::StreamKey;
 
 /// Fraction of the graded mapping that is linear (the rest is quadratic): cells near the origin are
@@ -457,7 +458,7 @@ fn walk(cfg: &LobeConfig, photon: u64, t: &mut Tally) {
     let nbins = cfg.direction_bins as f64;
     for k in 1..=cfg.max_order {
         let dim = 3 * (k as u32 - 1);
-        let step = -(-rng.uniform(dim)).ln_1p();
+        let step = free_flight(rng.uniform(dim), 1.0);
         p += step * d;
         if k >= 2 {
             let rho2 = p.x * p.x + p.y * p.y;

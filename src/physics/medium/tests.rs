@@ -28,3 +28,26 @@ fn albedo_and_extinction_are_the_remapping_of_sec_4_3() {
     assert_eq!(HomogeneousMedium { sigma_s: 0.0, sigma_a: 5.0, g: 0.0 }.albedo(), 0.0);
     assert_eq!(HomogeneousMedium { sigma_s: 5.0, sigma_a: 0.0, g: -0.9 }.albedo(), 1.0);
 }
+
+#[test]
+fn free_flight_inverts_the_extinguished_fraction_even_where_it_is_tiny() {
+    // Analytic: extinguished(σ, L) = 1 − e^{−σL}; at σL = 1e-12 the naive 1 − exp(−x) keeps ~4 digits.
+    for (sigma, length) in [(1e-12, 1.0), (2.0, 0.5), (1.0, 30.0), (1e3, 1e-3)] {
+        let mass = extinguished(sigma, length);
+        let x: f64 = sigma * length;
+        let want = if x < 1e-6 { x - x * x / 2.0 } else { 1.0 - (-x).exp() };
+        assert!((mass - want).abs() <= 4.0 * f64::EPSILON * want, "σL = {x}: {mass} vs {want}");
+        // The inverse is conditioned by 1/(σ(1 − mass)): one ulp of `mass` near 1 moves t by ε/(σe^{−σL}).
+        let back = free_flight(mass, sigma);
+        let tol = 1e-12 * length + f64::EPSILON / (sigma * (1.0 - mass));
+        assert!((back - length).abs() <= tol, "σL = {x}: {back} vs {length} ± {tol}");
+    }
+    // The median free flight is ln 2 / σ_t.
+    assert!((free_flight(0.5, 4.0) - std::f64::consts::LN_2 / 4.0).abs() < 1e-16);
+    // Edges: nothing extinguished over zero length; the whole beam at an infinite one.
+    assert_eq!(extinguished(3.0, 0.0), 0.0);
+    assert_eq!(extinguished(3.0, f64::INFINITY), 1.0);
+    assert_eq!(free_flight(0.0, 3.0), 0.0);
+    assert_eq!(free_flight(1.0, 3.0), f64::INFINITY);
+    assert_eq!(free_flight(0.25, 0.0), f64::INFINITY);
+}

@@ -38,6 +38,7 @@ use super::grid::Grid;
 use crate::render::occluder::Occluder;
 
 use crate::physics::hg;
+use crate::physics::medium::extinguished;
 use crate::render::color::Rgb;
 use crate::render::voxel::DirectionalLight;
 
@@ -405,7 +406,7 @@ pub(crate) fn initialise(grid: &Grid, light: &DirectionalLight, occluder: &dyn O
                         let e = light.irradiance[c] * t_in[c];
                         u[c] = e * (-0.5 * st * dz).exp();
                         // (σ_s/σ_t)(1 − e^{−σ_t Δz}) without cancellation for small σ_t Δz.
-                        s[c] = if st > 0.0 { e * cell.sigma_s[c] * -(-st * dz).exp_m1() / st } else { 0.0 };
+                        s[c] = if st > 0.0 { e * cell.sigma_s[c] * extinguished(st, dz) / st } else { 0.0 };
                     }
                     t_in[c] *= (-st * dz).exp();
                 }

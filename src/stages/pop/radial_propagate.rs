@@ -44,6 +44,7 @@ use super::octa;
 use super::propagate::{self, FlowTable, PhaseTimes, Settings};
 use super::radial::{NONE, RadialGrid, cell_solid_angle};
 use crate::physics::hg;
+use crate::physics::medium::extinguished;
 use crate::render::color::Rgb;
 use crate::render::spot::SpotCone;
 
@@ -223,7 +224,7 @@ pub fn initialise(
                             let e = p * light.intensity[ch] * (-sigma_t[ch] * prof[k]).exp();
                             let st = sigma_t[ch] * rho;
                             // (1 − e^{−σ ℓ}) without cancellation for small σ ℓ.
-                            let absorbed = -(-st * len).exp_m1();
+                            let absorbed = extinguished(st, len);
                             cells[k].0[ch] += e * if st > 0.0 { absorbed / st } else { len };
                             cells[k].1[ch] += e * albedo[ch] * absorbed;
                         }

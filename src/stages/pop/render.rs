@@ -13,6 +13,7 @@ use rayon::prelude::*;
 
 use super::grid::Grid;
 
+use crate::physics::medium::extinguished;
 use crate::render::ViewCamera;
 use crate::render::color::Rgb;
 use crate::render::voxel::VoxelMedium;
@@ -181,7 +182,7 @@ pub fn march_with(
                         continue;
                     }
                     // ∫ T σ_s J over the step for constant coefficients, without cancellation.
-                    let absorbed = -(-st * dt).exp_m1();
+                    let absorbed = extinguished(st, dt);
                     radiance[c] += trans[c] * (absorbed * (ss / st) * j[c] + ss * extra[c]);
                     trans[c] *= 1.0 - absorbed;
                 }

@@ -37,6 +37,7 @@ use glam::DVec3;
 
 use super::points::VolumeSample;
 use crate::physics::hg;
+use crate::physics::medium::{extinguished, free_flight};
 use crate::physics::rng::{Draws, SampleStream};
 use crate::render::dielectric::Setup;
 use crate::render::optics::{fresnel, reflect, refract};
@@ -218,13 +219,13 @@ fn around(axis: DVec3, mu: f64, phi: f64) -> DVec3 {
 pub(crate) fn glow_photon(setup: &Setup, v: &VolumeSample, stream: SampleStream, eps: f64) -> Option<Photon> {
     let m = setup.material;
     let sig = m.sigma_t.iter().copied().fold(f64::INFINITY, f64::min);
-    let a = -(-sig * v.length).exp_m1();
+    let a = extinguished(sig, v.length);
     if !(a > 0.0 && sig > 0.0) || m.albedo.iter().all(|&x| x <= 0.0) {
         return None;
     }
     let mut draws = Draws::new(stream);
     // First scattering point in the interval, pdf σ̄e^{−σ̄t}/a on [0, L].
-    let t = (-(-draws.draw() * a).ln_1p() / sig).clamp(0.0, v.length);
+    let t = free_flight(draws.draw() * a, sig).clamp(0.0, v.length);
     let pdf = sig * (-sig * t).exp() / a;
     let mut w: [f64; 3] = std::array::from_fn(|c| v.flux[c] * m.sigma_s(c) * (-m.sigma_t[c] * t).exp() / pdf);
     let mut x = v.start + v.direction * t;
@@ -238,7 +239,7 @@ pub(crate) fn glow_photon(setup: &Setup, v: &VolumeSample, stream: SampleStream,
         if h.mesh != setup.object || h.front_face {
             return None;
         }
-        let flight = -(-draws.draw()).ln_1p() / sig;
+        let flight = free_flight(draws.draw(), sig);
         if flight >= h.t {
             (0..3).for_each(|c| w[c] *= (-(m.sigma_t[c] - sig) * h.t).exp());
             let nb = DVec3::from_array(h.geometric_normal);

@@ -42,6 +42,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::object_light::{CAUSTIC_K, GLOW_K, ObjectLight, Photon, PhotonMap, glow_photon, land, receives};
+use crate::physics::medium::{extinguished, free_flight};
 use crate::physics::rng::StreamKey;
 use crate::render::dielectric::{Emitter, Setup};
 use crate::render::optics::{fresnel, reflect, refract};
@@ -149,7 +150,7 @@ impl VolumeSample {
     pub fn track_length(&self, sigma_t: [f64; 3]) -> [f64; 3] {
         std::array::from_fn(|c| {
             let (s, l) = (sigma_t[c], self.length);
-            if s > 0.0 && s * l > 0.0 { self.flux[c] * (-(-s * l).exp_m1()) / s } else { self.flux[c] * l }
+            if s > 0.0 && s * l > 0.0 { self.flux[c] * extinguished(s, l) / s } else { self.flux[c] * l }
         })
     }
 
@@ -528,10 +529,10 @@ fn place_intervals(ctx: &LightCtx, ray: &Entering, seg: &Segment, out: &mut Vec<
     }
     let sigma = ctx.sigma_min;
     let n = ctx.samples_per_ray;
-    let a = -(-sigma * s).exp_m1();
+    let a = extinguished(sigma, s);
     let mut prev = 0.0f64;
     for k in 1..=n {
-        let t = if k == n { s } else { (-(-(k as f64) * a / n as f64).ln_1p() / sigma).clamp(prev, s) };
+        let t = if k == n { s } else { free_flight(k as f64 * a / n as f64, sigma).clamp(prev, s) };
         if t > prev {
             out.push(VolumeSample {
                 start: origin + dir * prev,

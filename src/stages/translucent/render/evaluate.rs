@@ -2,6 +2,7 @@
 //! single, double, multiple and bounced scattering per segment, by tree cuts over the light samples.
 
 use super::*;
+use crate::physics::medium::extinguished;
 
 pub(super) struct Evaluator<'a> {
     pub(super) setup: &'a Setup<'a>,
@@ -410,7 +411,7 @@ pub(super) fn single_pass(
                             let st = m.sigma_t[c];
                             let e = v.flux[c] * (-0.5 * st * v.length).exp() / area;
                             // e^{−σa} − e^{−σb} = e^{−σa}(1 − e^{−σ(b−a)}), stable for thin boxes.
-                            let dt = (-st * a).exp() * -(-st * (b - a)).exp_m1();
+                            let dt = (-st * a).exp() * extinguished(st, b - a);
                             *x += m.albedo[c] * ph * e * dt;
                         }
                     });

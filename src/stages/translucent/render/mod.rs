@@ -80,6 +80,7 @@ use super::object_light::ObjectLight;
 use super::octree::{CutEntry, Item, Octree};
 use super::points::{PointOptions, Points, SurfaceSample, VolumeSample};
 use crate::physics::hg::phase;
+use crate::physics::medium::{extinguished, free_flight};
 use crate::physics::rng::StreamKey;
 use crate::render::ViewCamera;
 use crate::render::dielectric::{Material, Setup};
@@ -705,14 +706,14 @@ pub fn render(
 fn camera_samples(s: &Segment, m: &Material) -> Vec<(f64, [f64; 3])> {
     let k = s.samples.max(1) as usize;
     let sr = m.sigma_t.iter().copied().fold(f64::INFINITY, f64::min);
-    let mass = -(-sr * s.d_max).exp_m1(); // 1 − e^{−σ d_max}
+    let mass = extinguished(sr, s.d_max);
     if mass.is_nan() || mass <= 0.0 {
         return Vec::new();
     }
     (0..k)
         .map(|i| {
             let u = (i as f64 + 0.5) / k as f64 * mass;
-            let d = -(-u).ln_1p() / sr;
+            let d = free_flight(u, sr);
             // Interval width around d for this mass: (mass/k) / (σ_r e^{−σ_r d}).
             let base = mass / k as f64 / sr;
             let wts = std::array::from_fn(|c| base * (-(m.sigma_t[c] - sr) * d).exp());
