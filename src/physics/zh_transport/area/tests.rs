@@ -7,6 +7,7 @@
 
 use std::f64::consts::PI;
 
+use super::fit::{fit_energy, wrap_half_turn};
 use super::*;
 use crate::reference::walk;
 
