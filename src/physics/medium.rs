@@ -10,6 +10,10 @@
 //! fraction drawn is below `extinguished(σ_t, L)`): the distance sampling of wang2018's light and
 //! camera samples (Sec. 4.1) and of the lobe generator's walks (Sec. 5.2).
 //!
+//! Per colour channel the same coefficients form an [`RgbMedium`]: the coefficients of the voxel media
+//! of POP (`render::voxel`), of the god rays' box (`stages::god_rays`) and of the analytic fog
+//! components (`stages::image_fog`), each adding only its own density representation.
+//!
 //! The ZH response tables (`tables::zh_response`), their generator's own query
 //! (`physics::zh_transport::query`) and the lightmap bake (`stages::bake`, the effective medium along a
 //! segment, dubouchet2019 Sec. 4.4) all read this one description. Scene media (per-channel, with a
@@ -69,6 +73,41 @@ impl HomogeneousMedium {
     pub fn albedo(&self) -> f64 {
         let sigma_t = self.sigma_t();
         if sigma_t > 0.0 { self.sigma_s / sigma_t } else { 0.0 }
+    }
+}
+
+/// A homogeneous medium per colour channel (R, G, B) at density 1, scene units. Methods whose
+/// factorisation shares one phase function across channels (baran2010's god rays, iser2018's fog) read
+/// the channel mean [`RgbMedium::mean_g`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RgbMedium {
+    /// Scattering coefficient σ_s (1/m) per channel.
+    pub sigma_s: [f64; 3],
+    /// Absorption coefficient σ_a (1/m) per channel.
+    pub sigma_a: [f64; 3],
+    /// HG mean cosine per channel.
+    pub g: [f64; 3],
+}
+
+impl RgbMedium {
+    /// The same coefficients in every channel.
+    pub fn grey(sigma_s: f64, sigma_a: f64, g: f64) -> Self {
+        Self { sigma_s: [sigma_s; 3], sigma_a: [sigma_a; 3], g: [g; 3] }
+    }
+
+    /// Channel `c` (0, 1 or 2).
+    pub fn channel(&self, c: usize) -> HomogeneousMedium {
+        HomogeneousMedium { sigma_s: self.sigma_s[c], sigma_a: self.sigma_a[c], g: self.g[c] }
+    }
+
+    /// Extinction σ_t = σ_s + σ_a per channel (1/m).
+    pub fn sigma_t(&self) -> [f64; 3] {
+        [0, 1, 2].map(|c| self.sigma_s[c] + self.sigma_a[c])
+    }
+
+    /// The channel mean of g, `(g_R + g_G + g_B)/3`.
+    pub fn mean_g(&self) -> f64 {
+        (self.g[0] + self.g[1] + self.g[2]) / 3.0
     }
 }
 

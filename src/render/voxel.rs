@@ -13,6 +13,8 @@ use std::path::Path;
 
 use glam::DVec3;
 
+use crate::physics::medium::RgbMedium;
+
 /// A box of voxels with one density each; outside the box the density is 0.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VoxelMedium {
@@ -24,12 +26,9 @@ pub struct VoxelMedium {
     pub dims: [usize; 3],
     /// Density per voxel, index `x + dims[0]·(y + dims[1]·z)`; multiplies `sigma_s` and `sigma_a`.
     pub density: Vec<f32>,
-    /// Scattering coefficient per channel at density 1 \[1/m\].
-    pub sigma_s: [f64; 3],
-    /// Absorption coefficient per channel at density 1 \[1/m\].
-    pub sigma_a: [f64; 3],
-    /// HG mean cosine per channel, in `[0, 1)` (elek2014 does not propagate back-scattering media).
-    pub g: [f64; 3],
+    /// The coefficients at density 1, g in `[0, 1)` per channel (elek2014 does not propagate
+    /// back-scattering media).
+    pub coefficients: RgbMedium,
 }
 
 /// A distant light: parallel radiance along one direction (elek2014 Sec. 4).
@@ -53,9 +52,9 @@ impl VoxelMedium {
         max: DVec3,
         dims: [usize; 3],
         density: Vec<f32>,
-        coefficients: ([f64; 3], [f64; 3], [f64; 3]),
+        coefficients: RgbMedium,
     ) -> Result<Self, String> {
-        let (sigma_s, sigma_a, g) = coefficients;
+        let RgbMedium { sigma_s, sigma_a, g } = coefficients;
         if !(min.is_finite() && max.is_finite()) || (max - min).min_element() <= 0.0 {
             return Err(format!("the medium box {min} – {max} is empty or not finite; give max > min on every axis"));
         }
@@ -84,14 +83,14 @@ impl VoxelMedium {
                 return Err(format!("channel {c}: g = {}; POP propagates forward-scattering media, g in [0, 1)", g[c]));
             }
         }
-        Ok(Self { min, max, dims, density, sigma_s, sigma_a, g })
+        Ok(Self { min, max, dims, density, coefficients })
     }
 
     /// A homogeneous box (one voxel of density 1).
     ///
     /// # Errors
     /// As [`VoxelMedium::new`].
-    pub fn homogeneous(min: DVec3, max: DVec3, coefficients: ([f64; 3], [f64; 3], [f64; 3])) -> Result<Self, String> {
+    pub fn homogeneous(min: DVec3, max: DVec3, coefficients: RgbMedium) -> Result<Self, String> {
         Self::new(min, max, [1, 1, 1], vec![1.0], coefficients)
     }
 
@@ -103,7 +102,7 @@ impl VoxelMedium {
         min: DVec3,
         max: DVec3,
         dims: [usize; 3],
-        coefficients: ([f64; 3], [f64; 3], [f64; 3]),
+        coefficients: RgbMedium,
         density: impl Fn(DVec3) -> f64,
     ) -> Result<Self, String> {
         let size = (max - min) / DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);

@@ -42,6 +42,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::physics::medium::RgbMedium;
+
 /// Luminous efficacy used to turn photometric inputs into voltab's radiometric units \[lm/W\].
 pub const LUMENS_PER_WATT: f64 = 683.0;
 
@@ -370,15 +372,19 @@ impl SceneError {
 }
 
 impl Medium {
+    /// The coefficients at density 1, without the density field and the boundary.
+    pub fn coefficients(&self) -> RgbMedium {
+        RgbMedium { sigma_s: self.sigma_s, sigma_a: self.sigma_a, g: self.g }
+    }
+
     /// Extinction `σ_s + σ_a` per channel at density 1.
     pub fn sigma_t(&self) -> Rgb {
-        [0, 1, 2].map(|c| self.sigma_s[c] + self.sigma_a[c])
+        self.coefficients().sigma_t()
     }
 
     /// Single-scattering albedo per channel (0 where `σ_t = 0`).
     pub fn albedo(&self) -> Rgb {
-        let t = self.sigma_t();
-        [0, 1, 2].map(|c| if t[c] > 0.0 { self.sigma_s[c] / t[c] } else { 0.0 })
+        [0, 1, 2].map(|c| self.coefficients().channel(c).albedo())
     }
 }
 

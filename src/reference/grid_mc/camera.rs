@@ -204,7 +204,7 @@ pub fn render(
 ) -> ReferenceImage {
     let setup = Setup {
         vox: Voxels::new(medium),
-        sigma_t: [0, 1, 2].map(|c| medium.sigma_s[c] + medium.sigma_a[c]),
+        sigma_t: medium.coefficients.sigma_t(),
         walks: walks(medium, light),
         lighting: light_dir(light).map(Lighting::Directional),
         occluder: &NoOccluder,
@@ -228,7 +228,7 @@ pub fn render_environment(
     let unit = DirectionalLight { direction: DVec3::X, irradiance: [1.0; 3] };
     let setup = Setup {
         vox: Voxels::new(medium),
-        sigma_t: [0, 1, 2].map(|c| medium.sigma_s[c] + medium.sigma_a[c]),
+        sigma_t: medium.coefficients.sigma_t(),
         walks: walks(medium, &unit),
         lighting: Some(Lighting::Environment(env, EnvSampler::new(env))),
         occluder,

@@ -230,15 +230,13 @@ fn walks(medium: &VoxelMedium, light: &DirectionalLight) -> Vec<Walk> {
     let mut out: Vec<(usize, Walk)> = Vec::new();
     for c in 0..3 {
         let e = if light.irradiance[c].is_finite() { light.irradiance[c] } else { 0.0 };
-        let key = (medium.sigma_s[c], medium.sigma_a[c], medium.g[c]);
-        if let Some((_, w)) =
-            out.iter_mut().find(|(k, _)| (medium.sigma_s[*k], medium.sigma_a[*k], medium.g[*k]) == key)
-        {
+        let key = medium.coefficients.channel(c);
+        if let Some((_, w)) = out.iter_mut().find(|(k, _)| medium.coefficients.channel(*k) == key) {
             w.e[c] = e;
         } else {
             let mut ev = [0.0; 3];
             ev[c] = e;
-            let w = Walk { sigma_s: key.0, sigma_t: key.0 + key.1, g: key.2, e: ev };
+            let w = Walk { sigma_s: key.sigma_s, sigma_t: key.sigma_s + key.sigma_a, g: key.g, e: ev };
             out.push((c, w));
         }
     }

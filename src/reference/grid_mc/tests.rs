@@ -8,10 +8,11 @@ use glam::DVec3;
 
 use super::*;
 use crate::physics::hg::{cdf, phase, sample_mu};
+use crate::physics::medium::RgbMedium;
 use crate::render::ViewCamera;
 
 fn cube(s: [f64; 3], a: [f64; 3], g: [f64; 3]) -> VoxelMedium {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, (s, a, g)).unwrap()
+    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium { sigma_s: s, sigma_a: a, g }).unwrap()
 }
 
 fn light(d: DVec3, e: [f64; 3]) -> DirectionalLight {
@@ -83,7 +84,7 @@ fn vacuum_fluence_is_the_irradiance() {
         DVec3::new(2.0, 1.0, 1.0),
         [2, 2, 2],
         vec![0.0; 8],
-        ([1.0; 3], [1.0; 3], [0.5; 3]),
+        RgbMedium::grey(1.0, 1.0, 0.5),
     )
     .unwrap();
     let e = [1.5, 1.0, 0.5];
@@ -140,7 +141,7 @@ fn albedo_one_conserves_energy_and_uncollided_is_exact() {
 /// estimators of the same quantity), and absorbed + escaped = injected, within 4 standard errors.
 #[test]
 fn absorption_from_collisions_matches_track_length_fluence() {
-    let m = VoxelMedium::from_fn(DVec3::ZERO, DVec3::ONE, [4, 3, 2], ([2.0; 3], [1.0; 3], [0.5; 3]), |p| {
+    let m = VoxelMedium::from_fn(DVec3::ZERO, DVec3::ONE, [4, 3, 2], RgbMedium::grey(2.0, 1.0, 0.5), |p| {
         0.5 + p.x + p.y * p.z
     })
     .unwrap();
@@ -225,11 +226,14 @@ fn run_in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
 
 #[test]
 fn results_do_not_depend_on_the_thread_count() {
-    let m =
-        VoxelMedium::from_fn(DVec3::ZERO, DVec3::ONE, [3, 3, 3], ([4.0, 4.0, 2.0], [0.1; 3], [0.7, 0.7, 0.3]), |p| {
-            p.x + 0.2
-        })
-        .unwrap();
+    let m = VoxelMedium::from_fn(
+        DVec3::ZERO,
+        DVec3::ONE,
+        [3, 3, 3],
+        RgbMedium { sigma_s: [4.0, 4.0, 2.0], sigma_a: [0.1; 3], g: [0.7, 0.7, 0.3] },
+        |p| p.x + 0.2,
+    )
+    .unwrap();
     let l = light(DVec3::new(1.0, 0.3, -0.2), [1.0, 2.0, 3.0]);
     let spec = TallySpec { dims: [4, 4, 4], theta_bins: 5, axis: DVec3::X };
     let go = || {
@@ -309,7 +313,7 @@ fn black_where_nothing_scatters_or_the_ray_misses() {
     assert!(r.radiance.iter().chain(&r.single).chain(&r.variance).all(|p| *p == [0.0; 3]));
     assert!(r.transmittance.iter().any(|p| p[0] < 0.1));
     // Density 0.
-    let m0 = VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [1, 1, 1], vec![0.0], ([5.0; 3], [1.0; 3], [0.5; 3])).unwrap();
+    let m0 = VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [1, 1, 1], vec![0.0], RgbMedium::grey(5.0, 1.0, 0.5)).unwrap();
     let r = render(&m0, &l, &cam, &opts);
     assert!(r.radiance.iter().all(|p| *p == [0.0; 3]));
     assert!(r.transmittance.iter().all(|p| *p == [1.0; 3]));
@@ -355,7 +359,7 @@ fn extreme_inputs_stay_finite() {
         cube([1.0; 3], [0.1; 3], [0.999; 3]),
         cube([1e4; 3], [0.0; 3], [0.5; 3]),
         cube([0.0; 3], [0.0; 3], [0.0; 3]),
-        VoxelMedium::from_fn(DVec3::ZERO, DVec3::ONE, [5, 4, 3], ([3.0; 3], [0.0; 3], [0.96; 3]), |p| {
+        VoxelMedium::from_fn(DVec3::ZERO, DVec3::ONE, [5, 4, 3], RgbMedium::grey(3.0, 0.0, 0.96), |p| {
             if p.x < 0.5 { 0.0 } else { 2.0 }
         })
         .unwrap(),

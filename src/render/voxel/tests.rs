@@ -45,8 +45,8 @@ fn exr_slices_read_as_the_volume_they_store() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-fn coeffs() -> ([f64; 3], [f64; 3], [f64; 3]) {
-    ([4.0; 3], [0.0; 3], [0.7; 3])
+fn coeffs() -> RgbMedium {
+    RgbMedium::grey(4.0, 0.0, 0.7)
 }
 
 #[test]
@@ -61,7 +61,7 @@ fn voxel_lookup_and_errors() {
     assert!(VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [1, 1, 1], vec![-1.0], coeffs()).is_err());
     assert!(VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [1, 1, 1], vec![f32::NAN], coeffs()).is_err());
     assert!(VoxelMedium::homogeneous(DVec3::ONE, DVec3::ZERO, coeffs()).is_err());
-    assert!(VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, ([1.0; 3], [0.0; 3], [-0.1; 3])).is_err());
+    assert!(VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(1.0, 0.0, -0.1)).is_err());
     assert!(VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [0, 1, 1], vec![], coeffs()).is_err());
 }
 

@@ -151,7 +151,7 @@ fn head_words(
     let tex = if light.texture().is_some_and(|t| t.width > 0 && t.height > 0) { 1.0 } else { 0.0 };
     w = word4(w, medium.region.0.map(|x| x as f32), shadow.resolution as f32);
     w = word4(w, medium.region.1.map(|x| x as f32), tex);
-    let g = if medium.g.is_finite() { medium.g.clamp(-0.999, 0.999) } else { 0.0 };
+    let g = medium.phase_g();
     w = word4(w, medium.sigma_s_clean().map(|x| x as f32), g as f32);
     w = word4(w, medium.sigma_t().map(|x| x as f32), dgamma as f32);
     w = w.f(setup.epipole[0] as f32).f(setup.epipole[1] as f32).f(setup.ref_dir[0] as f32).f(setup.ref_dir[1] as f32);
@@ -513,6 +513,7 @@ fn ms(t: Instant) -> f64 {
 pub(crate) mod tests {
 
     use super::*;
+    use crate::physics::medium::RgbMedium;
     use crate::render::gbuffer::distance_image;
     use crate::render::gpu::context::test_gpu;
     use crate::render::{RgbImage, rel_rmse};
@@ -622,9 +623,7 @@ pub(crate) mod tests {
     fn per_channel_sigma_and_a_textured_light_match_the_cpu() {
         let bvh = sphere_scene();
         let m = EpiMedium {
-            sigma_s: [0.02, 0.05, 0.1],
-            sigma_a: [0.01, 0.0, 0.02],
-            g: 0.5,
+            coefficients: RgbMedium { sigma_s: [0.02, 0.05, 0.1], sigma_a: [0.01, 0.0, 0.02], g: [0.5; 3] },
             region: crate::stages::god_rays::tests::BOX,
         };
         let mut half = Image::filled(8, 8, [1.0f32, 0.6, 0.3]);

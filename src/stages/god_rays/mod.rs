@@ -70,6 +70,7 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::physics::medium::RgbMedium;
 use crate::render::spot::SpotCone;
 use crate::render::{DistanceImage, Image, RgbImage, ViewCamera};
 use crate::scene::{Boundary, Density, LightKind, Scene};
@@ -167,15 +168,12 @@ impl EpiLight {
     }
 }
 
-/// A homogeneous medium with an HG phase function.
+/// A homogeneous medium with an HG phase function filling a box.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EpiMedium {
-    /// Scattering coefficient \[1/m\] per channel.
-    pub sigma_s: [f64; 3],
-    /// Absorption coefficient \[1/m\] per channel.
-    pub sigma_a: [f64; 3],
-    /// HG mean cosine (one value for all channels: the factorisation shares `β` across channels).
-    pub g: f64,
+    /// The coefficients; the phase function is read at the channel mean of `g` (one value for all
+    /// channels: the factorisation shares `β` across channels).
+    pub coefficients: RgbMedium,
     /// The box the medium fills, `(min, max)` corners \[m\]; vacuum outside it.
     pub region: ([f64; 3], [f64; 3]),
 }
@@ -185,7 +183,7 @@ pub struct EpiMedium {
 pub const MAX_LIGHT_GAIN: f64 = 64.0;
 
 impl EpiMedium {
-    /// The first homogeneous global medium of `scene` (its `g` is the channel mean) over the scene's
+    /// The first homogeneous global medium of `scene` over the scene's
     /// global-medium box, `None` if there is none (or the scene has no extent).
     pub fn from_scene(scene: &Scene) -> Option<EpiMedium> {
         let region = scene.global_medium_bounds()?;
@@ -193,7 +191,7 @@ impl EpiMedium {
             .media
             .iter()
             .find(|m| m.boundary == Boundary::Global && m.density == Density::Homogeneous)
-            .map(|m| EpiMedium { sigma_s: m.sigma_s, sigma_a: m.sigma_a, g: (m.g[0] + m.g[1] + m.g[2]) / 3.0, region })
+            .map(|m| EpiMedium { coefficients: m.coefficients(), region })
     }
 
     /// Why `scene` has no medium [`EpiMedium::from_scene`] accepts: each medium it has and what rules it
@@ -247,18 +245,23 @@ impl EpiMedium {
 
     /// Extinction per channel (negative or NaN inputs count as 0).
     pub fn sigma_t(&self) -> [f64; 3] {
-        [0, 1, 2].map(|c| clean(self.sigma_s[c]) + clean(self.sigma_a[c]))
+        [0, 1, 2].map(|c| clean(self.coefficients.sigma_s[c]) + clean(self.coefficients.sigma_a[c]))
     }
 
     /// Scattering per channel (negative or NaN inputs count as 0).
     pub fn sigma_s_clean(&self) -> [f64; 3] {
-        self.sigma_s.map(clean)
+        self.coefficients.sigma_s.map(clean)
     }
 
-    /// HG phase for cosine `mu` (g clamped to ±0.999).
+    /// The phase function's g: the channel mean, clamped to ±0.999 (0 when not finite).
+    pub fn phase_g(&self) -> f64 {
+        let g = self.coefficients.mean_g();
+        if g.is_finite() { g.clamp(-0.999, 0.999) } else { 0.0 }
+    }
+
+    /// HG phase for cosine `mu` at [`EpiMedium::phase_g`].
     pub fn phase(&self, mu: f64) -> f64 {
-        let g = if self.g.is_finite() { self.g.clamp(-0.999, 0.999) } else { 0.0 };
-        crate::physics::hg::phase(mu, g)
+        crate::physics::hg::phase(mu, self.phase_g())
     }
 }
 

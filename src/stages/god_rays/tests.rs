@@ -8,6 +8,7 @@ use glam::DVec3;
 use super::bench::{bench, rel_rmse};
 use super::tree::FenwickTree;
 use super::*;
+use crate::physics::medium::RgbMedium;
 use crate::physics::rng::StreamKey;
 use crate::render::gbuffer::distance_image;
 use crate::scene::bvh::{SceneBvh, procedural};
@@ -15,7 +16,7 @@ use crate::scene::bvh::{SceneBvh, procedural};
 pub(crate) const BOX: ([f64; 3], [f64; 3]) = ([-20.0; 3], [20.0; 3]);
 
 pub(crate) fn medium(s: f64, a: f64, g: f64) -> EpiMedium {
-    EpiMedium { sigma_s: [s; 3], sigma_a: [a; 3], g, region: BOX }
+    EpiMedium { coefficients: RgbMedium::grey(s, a, g), region: BOX }
 }
 
 /// `∫_a^b e^{−σ (s + u(s))} ds` exactly, for the view ray `eye + s·v` inside `region` and `u(s)` the
@@ -125,7 +126,7 @@ fn analytic(cam: &ViewCamera, depth: &DistanceImage, light: &EpiLight, m: &EpiMe
             let p = m.phase(-l.dot(v));
             img.data[y * cam.width + x] = [0, 1, 2].map(|c| {
                 let i = box_attenuated_integral(cam.position, v, -l, m.region, st[c], s0, d);
-                (m.sigma_s[c] * p * irradiance[c] * i) as f32
+                (m.coefficients.sigma_s[c] * p * irradiance[c] * i) as f32
             });
         }
     }
@@ -320,7 +321,7 @@ fn half_plane_shadow_matches_the_analytic_lit_interval() {
         for x in 0..cam.width {
             let v = cam.pixel_dir(x, y);
             let (_, d) = view_segment(cam.position, v, depth.at(x, y), bounds);
-            let val = m.sigma_s[0] * m.phase(-l.dot(v)) * half_plane_integral(v, l, d, 0.1, bounds);
+            let val = m.coefficients.sigma_s[0] * m.phase(-l.dot(v)) * half_plane_integral(v, l, d, 0.1, bounds);
             want.data[y * cam.width + x] = [val as f32; 3];
         }
     }
@@ -410,7 +411,10 @@ fn per_channel_sigma_and_textured_light() {
     let bvh = sphere_scene();
     let cam = camera(64, 48);
     let depth = distance_image(&bvh, &cam);
-    let m = EpiMedium { sigma_s: [0.02, 0.05, 0.1], sigma_a: [0.01, 0.0, 0.02], g: 0.5, region: BOX };
+    let m = EpiMedium {
+        coefficients: RgbMedium { sigma_s: [0.02, 0.05, 0.1], sigma_a: [0.01, 0.0, 0.02], g: [0.5; 3] },
+        region: BOX,
+    };
     let plain = dir_light([0.15, 0.1, -1.0]);
     let shadow = render_shadow_map(&bvh, &plain, BOX, 256);
     let base = render(&cam, &depth, &plain, &shadow, &m, &EpipolarOptions::default());

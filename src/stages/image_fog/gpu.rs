@@ -128,14 +128,14 @@ fn component_rows(medium: &FogMedium, eye: glam::DVec3) -> Vec<[f32; 16]> {
             };
             let f = |x: f64| x as f32;
             [
-                f(c.sigma_s[0]),
-                f(c.sigma_s[1]),
-                f(c.sigma_s[2]),
-                f(mean(c.sigma_s) * (1.0 - c.g).max(0.0)),
-                f(c.sigma_a[0]),
-                f(c.sigma_a[1]),
-                f(c.sigma_a[2]),
-                f(mean(c.sigma_a)),
+                f(c.coefficients.sigma_s[0]),
+                f(c.coefficients.sigma_s[1]),
+                f(c.coefficients.sigma_s[2]),
+                f(mean(c.coefficients.sigma_s) * (1.0 - c.coefficients.mean_g()).max(0.0)),
+                f(c.coefficients.sigma_a[0]),
+                f(c.coefficients.sigma_a[1]),
+                f(c.coefficients.sigma_a[2]),
+                f(mean(c.coefficients.sigma_a)),
                 f(axis[0]),
                 f(axis[1]),
                 f(axis[2]),

@@ -18,17 +18,15 @@
 
 use glam::DVec3;
 
+use crate::physics::medium::RgbMedium;
 use crate::scene::{Boundary, Density, Scene};
 
 /// One analytic component of the fog: coefficients at density 1 scaled by a density field.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FogComponent {
-    /// Scattering coefficient \[1/m\] per channel at density 1 (the paper's `C_s`).
-    pub sigma_s: [f64; 3],
-    /// Absorption coefficient \[1/m\] per channel at density 1 (the paper's `C_a`).
-    pub sigma_a: [f64; 3],
-    /// HG mean cosine (one value; scene media with per-channel `g` use the channel mean).
-    pub g: f64,
+    /// Coefficients at density 1 (the paper's `C_s`, `C_a`); the spread of Eq. 1 takes one `g`, the
+    /// channel mean.
+    pub coefficients: RgbMedium,
     /// Density field (homogeneous `ρ ≡ 1` or iser2018's exponential height fog).
     pub density: Density,
 }
@@ -90,12 +88,7 @@ impl FogMedium {
             .media
             .iter()
             .filter(|m| m.boundary == Boundary::Global)
-            .map(|m| FogComponent {
-                sigma_s: m.sigma_s,
-                sigma_a: m.sigma_a,
-                g: (m.g[0] + m.g[1] + m.g[2]) / 3.0,
-                density: m.density.clone(),
-            })
+            .map(|m| FogComponent { coefficients: m.coefficients(), density: m.density.clone() })
             .collect();
         if components.is_empty() { None } else { Some(FogMedium { components }) }
     }
@@ -115,13 +108,14 @@ impl FogMedium {
                 continue;
             }
             let mul = |k: f64| if k == 0.0 { 0.0 } else { k * p };
+            let RgbMedium { sigma_s, sigma_a, .. } = c.coefficients;
             for ch in 0..3 {
-                f.tau_a[ch] += mul(c.sigma_a[ch]);
-                f.tau_s[ch] += mul(c.sigma_s[ch]);
+                f.tau_a[ch] += mul(sigma_a[ch]);
+                f.tau_s[ch] += mul(sigma_s[ch]);
             }
-            let s_mean = (c.sigma_s[0] + c.sigma_s[1] + c.sigma_s[2]) / 3.0;
-            let a_mean = (c.sigma_a[0] + c.sigma_a[1] + c.sigma_a[2]) / 3.0;
-            f.tau_reduced += mul(s_mean * (1.0 - c.g).max(0.0));
+            let s_mean = (sigma_s[0] + sigma_s[1] + sigma_s[2]) / 3.0;
+            let a_mean = (sigma_a[0] + sigma_a[1] + sigma_a[2]) / 3.0;
+            f.tau_reduced += mul(s_mean * (1.0 - c.coefficients.mean_g()).max(0.0));
             f.tau_a_mean += mul(a_mean);
         }
         f

@@ -8,6 +8,7 @@ use glam::DVec3;
 
 use super::filter::{self, level_count, level_variances};
 use super::*;
+use crate::physics::medium::RgbMedium;
 use crate::scene::Density;
 
 /// `∫₀ᴰ f` by composite 16-point Gauss–Legendre on `panels` panels.
@@ -24,9 +25,7 @@ fn quad(f: impl Fn(f64) -> f64, d: f64, panels: usize) -> f64 {
 
 fn exp_component(rho: f64, b: f64, n: [f64; 3], o: [f64; 3]) -> FogComponent {
     FogComponent {
-        sigma_s: [0.02, 0.022, 0.025],
-        sigma_a: [0.001; 3],
-        g: 0.5,
+        coefficients: RgbMedium { sigma_s: [0.02, 0.022, 0.025], sigma_a: [0.001; 3], g: [0.5; 3] },
         density: Density::ExponentialHeight { rho, falloff: b, direction: n, offset: o },
     }
 }
@@ -86,8 +85,10 @@ fn downward_rays_beyond_the_naive_forms_range_stay_exact() {
 
 #[test]
 fn homogeneous_is_rho_d_and_components_add() {
-    let h =
-        FogComponent { sigma_s: [0.1, 0.2, 0.3], sigma_a: [0.01, 0.02, 0.03], g: 0.3, density: Density::Homogeneous };
+    let h = FogComponent {
+        coefficients: RgbMedium { sigma_s: [0.1, 0.2, 0.3], sigma_a: [0.01, 0.02, 0.03], g: [0.3; 3] },
+        density: Density::Homogeneous,
+    };
     let e = exp_component(0.8, 0.05, [0.0, 1.0, 0.0], [0.0; 3]);
     let o = DVec3::new(0.0, 1.7, 45.0);
     let dir = DVec3::new(0.1, -0.05, -1.0).normalize();
@@ -98,8 +99,8 @@ fn homogeneous_is_rho_d_and_components_add() {
     let pf = both.pixel_fog(o, dir, 37.25);
     let pe = e.density_integral(o, dir, 37.25);
     for c in 0..3 {
-        let want_s = h.sigma_s[c] * 37.25 + e.sigma_s[c] * pe;
-        let want_a = h.sigma_a[c] * 37.25 + e.sigma_a[c] * pe;
+        let want_s = h.coefficients.sigma_s[c] * 37.25 + e.coefficients.sigma_s[c] * pe;
+        let want_a = h.coefficients.sigma_a[c] * 37.25 + e.coefficients.sigma_a[c] * pe;
         assert!((pf.tau_s[c] - want_s).abs() < 1e-14 * want_s && (pf.tau_a[c] - want_a).abs() < 1e-14 * want_a);
         let t = (-(want_s + want_a)).exp();
         assert!((pf.transmittance()[c] - t).abs() < 1e-14);
@@ -112,7 +113,10 @@ fn homogeneous_is_rho_d_and_components_add() {
 fn sky_pixels_transmittance() {
     let o = DVec3::new(0.0, 1.7, 0.0);
     let h = FogMedium {
-        components: vec![FogComponent { sigma_s: [0.01; 3], sigma_a: [0.0; 3], g: 0.0, density: Density::Homogeneous }],
+        components: vec![FogComponent {
+            coefficients: RgbMedium { sigma_s: [0.01; 3], sigma_a: [0.0; 3], g: [0.0; 3] },
+            density: Density::Homogeneous,
+        }],
     };
     assert_eq!(h.pixel_fog(o, DVec3::Y, f64::INFINITY).transmittance(), [0.0; 3]);
     // Fog thinning upward: P = ρ e^{−b h₀}/(b μ) for an upward ray.
@@ -120,7 +124,7 @@ fn sky_pixels_transmittance() {
     let dir = DVec3::new(0.0, 0.5, -(0.75f64).sqrt());
     let p = 0.8 * (-0.05f64 * 1.7).exp() / (0.05 * 0.5);
     let t = e.pixel_fog(o, dir, f64::INFINITY).transmittance();
-    for (tc, ss) in t.iter().zip(e.components[0].sigma_s) {
+    for (tc, ss) in t.iter().zip(e.components[0].coefficients.sigma_s) {
         let want = (-(ss + 0.001) * p).exp();
         assert!((tc - want).abs() < 1e-14 && want > 0.3, "{tc} vs {want}");
     }
@@ -185,7 +189,10 @@ fn zero_spread_and_no_scattering_return_the_input_exactly() {
     // A medium that does not scatter: the final image is the attenuated image, bit for bit.
     let cam = ViewCamera::new([0.0; 3], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 0.8, 37, 23).unwrap();
     let m = FogMedium {
-        components: vec![FogComponent { sigma_s: [0.0; 3], sigma_a: [0.05; 3], g: 0.0, density: Density::Homogeneous }],
+        components: vec![FogComponent {
+            coefficients: RgbMedium { sigma_s: [0.0; 3], sigma_a: [0.05; 3], g: [0.0; 3] },
+            density: Density::Homogeneous,
+        }],
     };
     let dist = Image::filled(37, 23, 12.0f32);
     let out = render(&cam, &img, &dist, &m, &FogOptions::default());
@@ -313,7 +320,10 @@ fn camera_inside_dense_fog_gives_the_scattered_ambient() {
     dist.data[3] = f32::INFINITY;
     dist.data[4] = 0.0;
     let scatter = FogMedium {
-        components: vec![FogComponent { sigma_s: [40.0; 3], sigma_a: [0.0; 3], g: 0.7, density: Density::Homogeneous }],
+        components: vec![FogComponent {
+            coefficients: RgbMedium { sigma_s: [40.0; 3], sigma_a: [0.0; 3], g: [0.7; 3] },
+            density: Density::Homogeneous,
+        }],
     };
     let out = render(&cam, &img, &dist, &scatter, &FogOptions::default());
     assert!(out.image.data.iter().all(|p| p.iter().all(|c| c.is_finite())));
@@ -331,7 +341,10 @@ fn camera_inside_dense_fog_gives_the_scattered_ambient() {
     }
     // Absorbing dense fog: black, not NaN.
     let absorb = FogMedium {
-        components: vec![FogComponent { sigma_s: [40.0; 3], sigma_a: [5.0; 3], g: 0.7, density: Density::Homogeneous }],
+        components: vec![FogComponent {
+            coefficients: RgbMedium { sigma_s: [40.0; 3], sigma_a: [5.0; 3], g: [0.7; 3] },
+            density: Density::Homogeneous,
+        }],
     };
     let out = render(&cam, &img, &dist, &absorb, &FogOptions::default());
     for (i, p) in out.image.data.iter().enumerate() {

@@ -335,7 +335,7 @@ pub fn importance_map(
         .map(|i| (cells.center(cells.coords(i)), weight[i]))
         .collect();
     let step = 0.5 * cells.size.iter().copied().fold(f64::INFINITY, f64::min);
-    let sigma_t = medium.sigma_s[1] + medium.sigma_a[1];
+    let sigma_t = medium.coefficients.sigma_s[1] + medium.coefficients.sigma_a[1];
     let map = EnvMap::from_fn(w, h, |dir| {
         let mut sum = 0.0;
         for &(x, wt) in &used {

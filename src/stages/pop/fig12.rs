@@ -24,6 +24,7 @@ use super::grid::Grid;
 
 use super::propagate::{self, FlowTable, Observer, Settings};
 use super::render::{self, MarchOptions};
+use crate::physics::medium::RgbMedium;
 use crate::reference::grid_mc::{self, CameraOptions, LightTraceOptions, TallySpec};
 use crate::render::ViewCamera;
 use crate::render::occluder::NoOccluder;
@@ -38,7 +39,7 @@ pub const SIGMA_S: f64 = 4.0;
 /// # Errors
 /// `g ∉ [0, 1)`.
 pub fn cube(g: f64) -> Result<VoxelMedium, String> {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, ([SIGMA_S; 3], [0.0; 3], [g; 3]))
+    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(SIGMA_S, 0.0, g))
 }
 
 /// The Fig. 12 light: unit irradiance along `+x`.

@@ -29,7 +29,11 @@ pub struct Cell {
 impl Cell {
     /// The cell of `medium` at mean `density`.
     pub fn at_density(medium: &VoxelMedium, density: f64) -> Self {
-        Cell { sigma_s: medium.sigma_s.map(|v| v * density), sigma_a: medium.sigma_a.map(|v| v * density), density }
+        Cell {
+            sigma_s: medium.coefficients.sigma_s.map(|v| v * density),
+            sigma_a: medium.coefficients.sigma_a.map(|v| v * density),
+            density,
+        }
     }
 
     /// The mean over channels of `σ_s` and of `g`, and of the cells with medium: what Eq. 10's switch
@@ -101,7 +105,7 @@ impl Grid {
             dims,
             size,
             cells: Vec::new(),
-            g: medium.g,
+            g: medium.coefficients.g,
             link_transmittance: Vec::new(),
             link_decay: Vec::new(),
         };
@@ -126,7 +130,7 @@ impl Grid {
             dims,
             size: [ext.x / dims[0] as f64, ext.y / dims[1] as f64, ext.z / dims[2] as f64],
             cells: Vec::new(),
-            g: medium.g,
+            g: medium.coefficients.g,
             link_transmittance: Vec::new(),
             link_decay: Vec::new(),
         };

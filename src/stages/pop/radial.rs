@@ -149,7 +149,7 @@ impl RadialGrid {
             centroid,
             dirs,
             cells: Vec::new(),
-            g: medium.g,
+            g: medium.coefficients.g,
             neighbours: Vec::new(),
             link_transmittance: Vec::new(),
             link_decay: Vec::new(),

@@ -191,8 +191,9 @@ pub fn initialise(
         })
         .collect();
     let omega_sub = cell_solid_angle(n) / (m * m) as f64;
-    let sigma_t: Rgb = [0, 1, 2].map(|ch| medium.sigma_s[ch] + medium.sigma_a[ch]);
-    let albedo: Rgb = [0, 1, 2].map(|ch| if sigma_t[ch] > 0.0 { medium.sigma_s[ch] / sigma_t[ch] } else { 0.0 });
+    let sigma_t: Rgb = medium.coefficients.sigma_t();
+    let albedo: Rgb =
+        [0, 1, 2].map(|ch| if sigma_t[ch] > 0.0 { medium.coefficients.sigma_s[ch] / sigma_t[ch] } else { 0.0 });
     // Per angular cell: per shell (uncollided track-length power, scattered power), and emitted power.
     let per_cone: Vec<(Vec<(Rgb, Rgb)>, Rgb)> = (0..na)
         .into_par_iter()
@@ -472,9 +473,9 @@ impl super::render::StepSource for PointDirect<'_> {
             let d = self.density_integral(dir, r);
             let mu = dir.dot(-u);
             for c in 0..3 {
-                let tau = (m.sigma_s[c] + m.sigma_a[c]) * d;
+                let tau = (m.coefficients.sigma_s[c] + m.coefficients.sigma_a[c]) * d;
                 let eye = (-sigma_t[c] * t.clamp(0.0, len)).exp();
-                out[c] += light.intensity[c] * weight * vis * (-tau).exp() * eye * hg::phase(mu, m.g[c]);
+                out[c] += light.intensity[c] * weight * vis * (-tau).exp() * eye * hg::phase(mu, m.coefficients.g[c]);
             }
         }
         out

@@ -167,7 +167,8 @@ pub fn march_with(
                 if !sources.is_empty() {
                     let a = camera.position + dir * (t0 + s as f64 * dt);
                     let b = camera.position + dir * (t0 + (s + 1) as f64 * dt);
-                    let sigma_t = [0, 1, 2].map(|c| rho * (medium.sigma_s[c] + medium.sigma_a[c]));
+                    let sigma_t =
+                        [0, 1, 2].map(|c| rho * (medium.coefficients.sigma_s[c] + medium.coefficients.sigma_a[c]));
                     for src in sources {
                         let e = src.step_integral(a, b, sigma_t);
                         for c in 0..3 {
@@ -176,8 +177,8 @@ pub fn march_with(
                     }
                 }
                 for c in 0..3 {
-                    let ss = rho * medium.sigma_s[c];
-                    let st = ss + rho * medium.sigma_a[c];
+                    let ss = rho * medium.coefficients.sigma_s[c];
+                    let st = ss + rho * medium.coefficients.sigma_a[c];
                     if st <= 0.0 {
                         continue;
                     }

@@ -88,7 +88,7 @@ pub fn transmittance(medium: &VoxelMedium, a: DVec3, b: DVec3) -> Rgb {
     let n = (((exit - enter) / step).ceil() as usize).clamp(1, 4096);
     let h = (exit - enter) / n as f64;
     let depth: f64 = (0..n).map(|k| medium.density_at(a + d * (enter + (k as f64 + 0.5) * h))).sum::<f64>() * h;
-    [0, 1, 2].map(|c| (-(medium.sigma_s[c] + medium.sigma_a[c]) * depth).exp())
+    [0, 1, 2].map(|c| (-(medium.coefficients.sigma_s[c] + medium.coefficients.sigma_a[c]) * depth).exp())
 }
 
 /// The texel a ray from `origin` along unit `dir` produces carrying incident flux `flux_in` (module doc).

@@ -12,6 +12,7 @@
 use glam::DVec3;
 
 use super::radial_propagate::PointLight;
+use crate::physics::medium::RgbMedium;
 use crate::render::occluder::Occluder;
 use crate::render::spot::SpotCone;
 use crate::render::voxel::{DirectionalLight, VoxelMedium};
@@ -349,7 +350,7 @@ pub fn scene_media(
              environment map; POP propagates light from those (add one)"
         ));
     }
-    let coefficients = (m.sigma_s, m.sigma_a, m.g.map(|g| g.min(0.999_999)));
+    let coefficients = RgbMedium { g: m.g.map(|g| g.min(0.999_999)), ..m.coefficients() };
     let medium = match raw {
         Some(r) => {
             let size = (hi - lo) / DVec3::new(r.dims[0] as f64, r.dims[1] as f64, r.dims[2] as f64);

@@ -6,12 +6,13 @@ use super::grid::{Grid, anisotropy_decay};
 
 use super::propagate::{FlowTable, Observer, Settings, propagate};
 use super::render::{MarchOptions, march, upsample};
+use crate::physics::medium::RgbMedium;
 use crate::render::ViewCamera;
 use crate::render::occluder::{NoOccluder, Occluder};
 use crate::render::voxel::{DirectionalLight, VoxelMedium};
 
 fn cube(sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, ([sigma_s; 3], [sigma_a; 3], [g; 3])).unwrap()
+    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(sigma_s, sigma_a, g)).unwrap()
 }
 
 fn light_x() -> DirectionalLight {
@@ -73,7 +74,7 @@ fn seed_is_the_first_scattering_and_energy_never_increases() {
         DVec3::ZERO,
         DVec3::ONE,
         [8, 8, 8],
-        ([4.0, 2.0, 1.0], [0.5, 0.1, 0.0], [0.7, 0.5, 0.9]),
+        RgbMedium { sigma_s: [4.0, 2.0, 1.0], sigma_a: [0.5, 0.1, 0.0], g: [0.7, 0.5, 0.9] },
         |p| {
             if p.x > 0.5 { 10.0 } else { 0.2 }
         },
@@ -191,7 +192,7 @@ fn occluded_links_and_shadowed_cells_carry_nothing() {
 
 #[test]
 fn results_do_not_depend_on_the_thread_count() {
-    let m = VoxelMedium::from_fn(DVec3::ZERO, DVec3::ONE, [6, 6, 6], ([4.0; 3], [0.2; 3], [0.8; 3]), |p| 1.0 + p.y)
+    let m = VoxelMedium::from_fn(DVec3::ZERO, DVec3::ONE, [6, 6, 6], RgbMedium::grey(4.0, 0.2, 0.8), |p| 1.0 + p.y)
         .unwrap();
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();

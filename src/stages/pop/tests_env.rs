@@ -11,6 +11,7 @@ use super::grid::Grid;
 use super::merge::merge_rectilinear;
 use super::propagate::{FlowTable, Observer, Settings, propagate, propagate_lobe};
 use super::render::{MarchOptions, march};
+use crate::physics::medium::RgbMedium;
 use crate::reference::grid_mc::{self, CameraOptions};
 use crate::render::ViewCamera;
 use crate::render::color::Rgb;
@@ -198,7 +199,7 @@ fn black_and_degenerate_maps_give_no_or_isotropic_ordinates() {
 }
 
 fn cube(sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, ([sigma_s; 3], [sigma_a; 3], [g; 3])).unwrap()
+    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(sigma_s, sigma_a, g)).unwrap()
 }
 
 fn settings(iterations: usize) -> Settings {

@@ -12,12 +12,13 @@ use super::propagate::{FlowTable, Settings};
 use super::radial::{RadialGrid, shell_radii};
 use super::radial_propagate::{self as rp, PointLight, inverse_square_integral};
 use super::render::MarchOptions;
+use crate::physics::medium::RgbMedium;
 use crate::render::ViewCamera;
 use crate::render::occluder::{NoOccluder, Occluder};
 use crate::render::voxel::VoxelMedium;
 
 fn medium(half: f64, sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {
-    VoxelMedium::homogeneous(DVec3::splat(-half), DVec3::splat(half), ([sigma_s; 3], [sigma_a; 3], [g; 3])).unwrap()
+    VoxelMedium::homogeneous(DVec3::splat(-half), DVec3::splat(half), RgbMedium::grey(sigma_s, sigma_a, g)).unwrap()
 }
 
 fn settings(iterations: usize) -> Settings {
@@ -86,7 +87,8 @@ fn single_scattering_quadrature(
     let delta = w.dot(dir);
     let b = (w - dir * delta).length().max(rp::R_MIN);
     let (ta, tb) = (((t_in - delta) / b).atan(), ((t_out - delta) / b).atan());
-    let (ss, st, g) = (m.sigma_s[ch], m.sigma_s[ch] + m.sigma_a[ch], m.g[ch]);
+    let (ss, st, g) =
+        (m.coefficients.sigma_s[ch], m.coefficients.sigma_s[ch] + m.coefficients.sigma_a[ch], m.coefficients.g[ch]);
     // Composite Gauss–Legendre (3 points) on `nodes` panels.
     let gl = [(-0.774_596_669_241_483_4, 5.0 / 9.0), (0.0, 8.0 / 9.0), (0.774_596_669_241_483_4, 5.0 / 9.0)];
     let h = (tb - ta) / nodes as f64;
@@ -170,7 +172,7 @@ fn energy_never_increases_and_extremes_stay_finite() {
         for v in p.fluence.iter().chain(&p.toward_eye).chain(&p.uncollided) {
             assert!(v.iter().all(|x| x.is_finite() && *x >= 0.0), "{name}: {v:?}");
         }
-        if m.sigma_s[0] == 0.0 {
+        if m.coefficients.sigma_s[0] == 0.0 {
             assert_eq!(p.energy[0], 0.0, "{name}: nothing scatters");
         }
         // Resampling at the light and everywhere else is finite.

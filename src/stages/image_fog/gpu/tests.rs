@@ -1,4 +1,5 @@
 use super::*;
+use crate::physics::medium::RgbMedium;
 use crate::render::gpu::context::test_gpu;
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
@@ -214,12 +215,12 @@ fn extreme_inputs_stay_finite_and_match_the_cpu() {
     dist.data[3] = f32::INFINITY;
     dist.data[4] = 0.0;
     dist.data[5] = f32::NAN;
-    let homog =
-        |s: f64, a: f64| FogComponent { sigma_s: [s; 3], sigma_a: [a; 3], g: 0.7, density: Density::Homogeneous };
+    let homog = |s: f64, a: f64| FogComponent {
+        coefficients: RgbMedium { sigma_s: [s; 3], sigma_a: [a; 3], g: [0.7; 3] },
+        density: Density::Homogeneous,
+    };
     let grazing = FogComponent {
-        sigma_s: [0.02, 0.022, 0.025],
-        sigma_a: [0.001; 3],
-        g: 0.5,
+        coefficients: RgbMedium { sigma_s: [0.02, 0.022, 0.025], sigma_a: [0.001; 3], g: [0.5; 3] },
         density: Density::ExponentialHeight {
             rho: 0.8,
             falloff: 0.05,
@@ -264,9 +265,7 @@ fn stiff_fog_integrals_stay_finite_and_match_the_cpu() {
         dist.data[i] = f32::INFINITY;
     }
     let height = |rho: f64, falloff: f64, direction: [f64; 3], offset: [f64; 3]| FogComponent {
-        sigma_s: [0.02, 0.022, 0.025],
-        sigma_a: [0.001; 3],
-        g: 0.5,
+        coefficients: RgbMedium { sigma_s: [0.02, 0.022, 0.025], sigma_a: [0.001; 3], g: [0.5; 3] },
         density: Density::ExponentialHeight { rho, falloff, direction, offset },
     };
     let up = [0.0, 1.0, 0.0];
@@ -305,9 +304,7 @@ fn an_all_sky_frame_matches_the_cpu() {
     let dist = Image::filled(64, 40, f32::INFINITY);
     let medium = FogMedium {
         components: vec![FogComponent {
-            sigma_s: [0.02, 0.022, 0.025],
-            sigma_a: [0.001; 3],
-            g: 0.5,
+            coefficients: RgbMedium { sigma_s: [0.02, 0.022, 0.025], sigma_a: [0.001; 3], g: [0.5; 3] },
             density: Density::ExponentialHeight {
                 rho: 0.8,
                 falloff: 0.05,

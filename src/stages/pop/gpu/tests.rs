@@ -5,6 +5,7 @@
 use glam::DVec3;
 
 use super::*;
+use crate::physics::medium::RgbMedium;
 use crate::render::gpu::context::test_gpu;
 use crate::render::occluder::NoOccluder;
 use crate::render::voxel::VoxelMedium;
@@ -13,7 +14,7 @@ use crate::scene::bvh::SceneBvh;
 use crate::stages::pop::scene::{BvhOccluder, scene_media};
 
 fn cube(sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, ([sigma_s; 3], [sigma_a; 3], [g; 3])).unwrap()
+    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(sigma_s, sigma_a, g)).unwrap()
 }
 
 fn light(d: DVec3) -> DirectionalLight {

@@ -1,4 +1,5 @@
 use super::*;
+use crate::physics::medium::RgbMedium;
 use crate::scene::fixtures::{cuboid, empty};
 use crate::scene::{Material, Surface};
 
@@ -16,9 +17,12 @@ fn floor(k: Rgb, top: f64, sigma_s: Rgb, sigma_a: Rgb) -> (Scene, SceneBvh, Voxe
     m.material = Some(0);
     s.meshes.push(m);
     let bvh = SceneBvh::build(&s);
-    let medium =
-        VoxelMedium::homogeneous(DVec3::new(-1.0, -0.1, -1.0), DVec3::new(1.0, top, 1.0), (sigma_s, sigma_a, [0.0; 3]))
-            .unwrap();
+    let medium = VoxelMedium::homogeneous(
+        DVec3::new(-1.0, -0.1, -1.0),
+        DVec3::new(1.0, top, 1.0),
+        RgbMedium { sigma_s, sigma_a, g: [0.0; 3] },
+    )
+    .unwrap();
     (s, bvh, medium)
 }
 

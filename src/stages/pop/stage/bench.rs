@@ -2,6 +2,7 @@
 //! residuum's speed-up of Sec. 5.4 (Fig. 8) on a thick, nearly conservative medium.
 
 use super::*;
+use crate::physics::medium::RgbMedium;
 
 /// elek2014 Sec. 5.4 as the paper measures it (Fig. 8): a thick, nearly conservative medium under an
 /// environment, every ordinate propagated to convergence against the switch at Eq. 10's `m'` with the
@@ -128,7 +129,7 @@ impl PopRender {
         );
         // The residuum on a thick, nearly conservative cube.
         let n = table.def.grid.map(|v| v as usize);
-        let medium = VoxelMedium::homogeneous(glam::DVec3::ZERO, glam::DVec3::ONE, ([20.0; 3], [0.02; 3], [0.95; 3]))
+        let medium = VoxelMedium::homogeneous(glam::DVec3::ZERO, glam::DVec3::ONE, RgbMedium::grey(20.0, 0.02, 0.95))
             .map_err(fail)?;
         let light = crate::stages::pop::fig12::light();
         let grid = Grid::new(&medium, light.direction, n, &NoOccluder).map_err(fail)?;
