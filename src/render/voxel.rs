@@ -149,6 +149,12 @@ impl VoxelMedium {
     }
 }
 
+/// Test fixture: the homogeneous unit cube `[0, 1]³` (one voxel of density 1) with `coefficients`.
+#[cfg(test)]
+pub(crate) fn unit_cube(coefficients: RgbMedium) -> VoxelMedium {
+    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, coefficients).expect("fixture coefficients are valid")
+}
+
 /// Reads a raw little-endian `f32` density volume of `dims` voxels (x fastest).
 ///
 /// # Errors

@@ -10,10 +10,7 @@ use super::*;
 use crate::physics::hg::{cdf, phase, sample_mu};
 use crate::physics::medium::RgbMedium;
 use crate::render::ViewCamera;
-
-fn cube(s: [f64; 3], a: [f64; 3], g: [f64; 3]) -> VoxelMedium {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium { sigma_s: s, sigma_a: a, g }).unwrap()
-}
+use crate::render::voxel::unit_cube;
 
 fn light(d: DVec3, e: [f64; 3]) -> DirectionalLight {
     DirectionalLight { direction: d.normalize(), irradiance: e }
@@ -52,7 +49,7 @@ fn exit_unit_cube(p: DVec3, w: DVec3) -> f64 {
 fn absorbing_slab_is_exact_and_noise_free() {
     let sa = [2.0, 0.5, 3.0];
     let e = [1.0, 2.0, 3.0];
-    let m = cube([0.0; 3], sa, [0.0; 3]);
+    let m = unit_cube(RgbMedium { sigma_s: [0.0; 3], sigma_a: sa, g: [0.0; 3] });
     let spec = TallySpec { dims: [8, 1, 1], theta_bins: 4, axis: DVec3::X };
     let t = light_trace(&m, &light(DVec3::X, e), &spec, &lt(256, 100));
     assert_eq!(t.walks, 3);
@@ -117,7 +114,7 @@ fn vacuum_fluence_is_the_irradiance() {
 /// radiance bins integrate to the fluence.
 #[test]
 fn albedo_one_conserves_energy_and_uncollided_is_exact() {
-    let m = cube([4.0; 3], [0.0; 3], [0.0; 3]);
+    let m = unit_cube(RgbMedium::grey(4.0, 0.0, 0.0));
     let spec = TallySpec { dims: [4, 1, 1], theta_bins: 6, axis: DVec3::X };
     let t = light_trace(&m, &light(DVec3::X, [1.0; 3]), &spec, &lt(4000, 100_000));
     assert_eq!(t.walks, 1);
@@ -174,7 +171,7 @@ fn absorption_from_collisions_matches_track_length_fluence() {
 #[test]
 fn thin_medium_once_scattered_radiance_matches_quadrature() {
     let (sigma, g) = (0.01, 0.7);
-    let m = cube([sigma; 3], [0.0; 3], [g; 3]);
+    let m = unit_cube(RgbMedium::grey(sigma, 0.0, g));
     let bins = 8;
     let spec = TallySpec { dims: [1, 1, 1], theta_bins: bins, axis: DVec3::X };
     let t = light_trace(&m, &light(DVec3::X, [1.0; 3]), &spec, &lt(4_000_000, 1));
@@ -268,7 +265,7 @@ fn chord(p: DVec3, w: DVec3) -> f64 {
 #[test]
 fn camera_single_scattering_matches_quadrature() {
     let (ss, sa, g) = (0.5, 0.25, 0.7);
-    let m = cube([ss; 3], [sa; 3], [g; 3]);
+    let m = unit_cube(RgbMedium::grey(ss, sa, g));
     let st = ss + sa;
     let l = light(DVec3::new(0.3, -0.2, -1.0), [1.0, 2.0, 0.5]);
     let cam = ViewCamera::new([0.5, 0.5, -2.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], 0.4, 5, 5).unwrap();
@@ -309,7 +306,7 @@ fn black_where_nothing_scatters_or_the_ray_misses() {
     let cam = ViewCamera::new([0.5, 0.5, -2.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], 1.2, 8, 6).unwrap();
     let opts = CameraOptions { samples: 50, seed: 1, max_events: 64 };
     // Albedo 0.
-    let r = render(&cube([0.0; 3], [3.0; 3], [0.5; 3]), &l, &cam, &opts);
+    let r = render(&unit_cube(RgbMedium::grey(0.0, 3.0, 0.5)), &l, &cam, &opts);
     assert!(r.radiance.iter().chain(&r.single).chain(&r.variance).all(|p| *p == [0.0; 3]));
     assert!(r.transmittance.iter().any(|p| p[0] < 0.1));
     // Density 0.
@@ -318,7 +315,7 @@ fn black_where_nothing_scatters_or_the_ray_misses() {
     assert!(r.radiance.iter().all(|p| *p == [0.0; 3]));
     assert!(r.transmittance.iter().all(|p| *p == [1.0; 3]));
     // Scattering medium: pixels whose ray misses the box are black with transmittance 1.
-    let r = render(&cube([2.0; 3], [0.0; 3], [0.5; 3]), &l, &cam, &opts);
+    let r = render(&unit_cube(RgbMedium::grey(2.0, 0.0, 0.5)), &l, &cam, &opts);
     let mut missed = 0;
     for y in 0..6 {
         for x in 0..8 {
@@ -335,10 +332,10 @@ fn black_where_nothing_scatters_or_the_ray_misses() {
     assert!(missed > 0);
     // No usable light: black, transmittance still exact.
     let dark = DirectionalLight { direction: DVec3::ZERO, irradiance: [1.0; 3] };
-    let r = render(&cube([2.0; 3], [0.0; 3], [0.5; 3]), &dark, &cam, &opts);
+    let r = render(&unit_cube(RgbMedium::grey(2.0, 0.0, 0.5)), &dark, &cam, &opts);
     assert!(r.radiance.iter().all(|p| *p == [0.0; 3]));
     let t = light_trace(
-        &cube([2.0; 3], [0.0; 3], [0.5; 3]),
+        &unit_cube(RgbMedium::grey(2.0, 0.0, 0.5)),
         &dark,
         &TallySpec { dims: [2, 2, 2], theta_bins: 2, axis: DVec3::X },
         &lt(100, 10),
@@ -356,9 +353,9 @@ fn all_finite(v: &[[f64; 3]]) -> bool {
 fn extreme_inputs_stay_finite() {
     let diag = DVec3::new(1.0, 1.0, 1.0);
     let media = [
-        cube([1.0; 3], [0.1; 3], [0.999; 3]),
-        cube([1e4; 3], [0.0; 3], [0.5; 3]),
-        cube([0.0; 3], [0.0; 3], [0.0; 3]),
+        unit_cube(RgbMedium::grey(1.0, 0.1, 0.999)),
+        unit_cube(RgbMedium::grey(1e4, 0.0, 0.5)),
+        unit_cube(RgbMedium::grey(0.0, 0.0, 0.0)),
         VoxelMedium::from_fn(DVec3::ZERO, DVec3::ONE, [5, 4, 3], RgbMedium::grey(3.0, 0.0, 0.96), |p| {
             if p.x < 0.5 { 0.0 } else { 2.0 }
         })
@@ -403,7 +400,7 @@ fn extreme_inputs_stay_finite() {
 #[test]
 #[ignore]
 fn fig12_timing() {
-    let m = cube([4.0; 3], [0.0; 3], [0.7; 3]);
+    let m = unit_cube(RgbMedium::grey(4.0, 0.0, 0.7));
     let l = light(DVec3::new(0.0, -1.0, 0.0), [1.0; 3]);
     let spec = TallySpec { dims: [32, 32, 32], theta_bins: 32, axis: DVec3::new(0.0, -1.0, 0.0) };
     let t = light_trace(&m, &l, &spec, &lt(1_000_000, 100_000));

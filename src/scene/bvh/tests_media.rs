@@ -1,23 +1,13 @@
 //! Media along rays and optical thickness against analytic values and quadrature.
 
-use super::procedural::{icosphere, mesh, scene};
+use super::procedural::{icosphere, scene};
 use super::*;
 use crate::physics::rng::StreamKey;
-use crate::scene::{Boundary, Density, Medium, Mesh};
+use crate::scene::fixtures::cuboid;
+use crate::scene::{Boundary, Density, Medium};
 
 fn medium(name: &str, sigma_t: [f64; 3], density: Density, boundary: Boundary) -> Medium {
     Medium { name: name.into(), sigma_s: sigma_t, sigma_a: [0.0; 3], g: [0.0; 3], density, boundary }
-}
-
-/// An axis-aligned box, 8 welded vertices, 12 outward counter-clockwise triangles (each face split
-/// along the diagonal through its lowest corner).
-fn cuboid(name: &str, lo: [f32; 3], hi: [f32; 3]) -> Mesh {
-    let positions: Vec<[f32; 3]> =
-        (0..8).map(|i| [0, 1, 2].map(|c| if i >> c & 1 == 1 { hi[c] } else { lo[c] })).collect();
-    // Vertex i has bit c set when coordinate c is at `hi`. Quads counter-clockwise seen from outside.
-    let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
-    let triangles = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-    mesh(name, positions, Vec::new(), triangles)
 }
 
 /// The unit cube [0, 1]³ bounding medium 0 (σ_t = 1), inside a global medium 1 (σ_t = 0.1).

@@ -113,10 +113,7 @@ fn homogeneous_is_rho_d_and_components_add() {
 fn sky_pixels_transmittance() {
     let o = DVec3::new(0.0, 1.7, 0.0);
     let h = FogMedium {
-        components: vec![FogComponent {
-            coefficients: RgbMedium { sigma_s: [0.01; 3], sigma_a: [0.0; 3], g: [0.0; 3] },
-            density: Density::Homogeneous,
-        }],
+        components: vec![FogComponent { coefficients: RgbMedium::grey(0.01, 0.0, 0.0), density: Density::Homogeneous }],
     };
     assert_eq!(h.pixel_fog(o, DVec3::Y, f64::INFINITY).transmittance(), [0.0; 3]);
     // Fog thinning upward: P = ρ e^{−b h₀}/(b μ) for an upward ray.
@@ -189,10 +186,7 @@ fn zero_spread_and_no_scattering_return_the_input_exactly() {
     // A medium that does not scatter: the final image is the attenuated image, bit for bit.
     let cam = ViewCamera::new([0.0; 3], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 0.8, 37, 23).unwrap();
     let m = FogMedium {
-        components: vec![FogComponent {
-            coefficients: RgbMedium { sigma_s: [0.0; 3], sigma_a: [0.05; 3], g: [0.0; 3] },
-            density: Density::Homogeneous,
-        }],
+        components: vec![FogComponent { coefficients: RgbMedium::grey(0.0, 0.05, 0.0), density: Density::Homogeneous }],
     };
     let dist = Image::filled(37, 23, 12.0f32);
     let out = render(&cam, &img, &dist, &m, &FogOptions::default());
@@ -320,10 +314,7 @@ fn camera_inside_dense_fog_gives_the_scattered_ambient() {
     dist.data[3] = f32::INFINITY;
     dist.data[4] = 0.0;
     let scatter = FogMedium {
-        components: vec![FogComponent {
-            coefficients: RgbMedium { sigma_s: [40.0; 3], sigma_a: [0.0; 3], g: [0.7; 3] },
-            density: Density::Homogeneous,
-        }],
+        components: vec![FogComponent { coefficients: RgbMedium::grey(40.0, 0.0, 0.7), density: Density::Homogeneous }],
     };
     let out = render(&cam, &img, &dist, &scatter, &FogOptions::default());
     assert!(out.image.data.iter().all(|p| p.iter().all(|c| c.is_finite())));
@@ -341,10 +332,7 @@ fn camera_inside_dense_fog_gives_the_scattered_ambient() {
     }
     // Absorbing dense fog: black, not NaN.
     let absorb = FogMedium {
-        components: vec![FogComponent {
-            coefficients: RgbMedium { sigma_s: [40.0; 3], sigma_a: [5.0; 3], g: [0.7; 3] },
-            density: Density::Homogeneous,
-        }],
+        components: vec![FogComponent { coefficients: RgbMedium::grey(40.0, 5.0, 0.7), density: Density::Homogeneous }],
     };
     let out = render(&cam, &img, &dist, &absorb, &FogOptions::default());
     for (i, p) in out.image.data.iter().enumerate() {

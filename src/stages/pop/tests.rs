@@ -9,11 +9,8 @@ use super::render::{MarchOptions, march, upsample};
 use crate::physics::medium::RgbMedium;
 use crate::render::ViewCamera;
 use crate::render::occluder::{NoOccluder, Occluder};
+use crate::render::voxel::unit_cube;
 use crate::render::voxel::{DirectionalLight, VoxelMedium};
-
-fn cube(sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(sigma_s, sigma_a, g)).unwrap()
-}
 
 fn light_x() -> DirectionalLight {
     DirectionalLight { direction: DVec3::X, irradiance: [1.0, 2.0, 0.5] }
@@ -29,7 +26,7 @@ fn finite(v: &[[f64; 3]]) -> bool {
 
 #[test]
 fn absorbing_medium_has_exact_uncollided_light_and_nothing_scattered() {
-    let m = cube(0.0, 3.0, 0.7);
+    let m = unit_cube(RgbMedium::grey(0.0, 3.0, 0.7));
     let grid = Grid::new(&m, DVec3::X, [4, 4, 10], &NoOccluder).unwrap();
     let p = propagate(&grid, &light_x(), &NoOccluder, &FlowTable::exact(64), &settings(20), Observer::ThetaBins(8));
     for k in 0..10 {
@@ -46,7 +43,7 @@ fn absorbing_medium_has_exact_uncollided_light_and_nothing_scattered() {
 
 #[test]
 fn vacuum_passes_light_unchanged() {
-    let m = cube(0.0, 0.0, 0.0);
+    let m = unit_cube(RgbMedium::grey(0.0, 0.0, 0.0));
     let grid = Grid::new(&m, DVec3::new(1.0, 1.0, 1.0), [3, 3, 3], &NoOccluder).unwrap();
     let p = propagate(
         &grid,
@@ -89,7 +86,7 @@ fn seed_is_the_first_scattering_and_energy_never_increases() {
     assert!(finite(&p.fluence) && finite(&p.bins) && finite(&p.uncollided));
     // The seed of a column equals the light that leaves the uncollided beam by scattering:
     // Σ_k S_k = E (σ_s/σ_t)(1 − T_column) in a column of one material.
-    let m1 = cube(3.0, 1.0, 0.5);
+    let m1 = unit_cube(RgbMedium::grey(3.0, 1.0, 0.5));
     let g1 = Grid::new(&m1, DVec3::X, [1, 1, 16], &NoOccluder).unwrap();
     let p1 = propagate(&g1, &light_x(), &NoOccluder, &FlowTable::exact(64), &settings(0), Observer::ThetaBins(1));
     // With no iterations the collided fluence is half the seed.
@@ -102,7 +99,7 @@ fn seed_is_the_first_scattering_and_energy_never_increases() {
 fn forward_dirac_lobes_move_one_cell_per_iteration() {
     // g → 1 with a tiny σ_s: a stays ≈ 1, so each seed moves straight along d and the collided
     // fluence of the last cell of a column is the sum of the seeds before it (+ half its own).
-    let m = cube(1e-3, 0.0, 0.999_999);
+    let m = unit_cube(RgbMedium::grey(1e-3, 0.0, 0.999_999));
     let grid = Grid::new(&m, DVec3::Z, [1, 1, 8], &NoOccluder).unwrap();
     let l = DirectionalLight { direction: DVec3::Z, irradiance: [1.0; 3] };
     let p = propagate(&grid, &l, &NoOccluder, &FlowTable::exact(1 << 14), &settings(50), Observer::ThetaBins(2));
@@ -120,7 +117,7 @@ fn forward_dirac_lobes_move_one_cell_per_iteration() {
 fn isotropic_medium_spreads_the_seed_by_the_cone_fractions() {
     // g = 0: the seed is isotropic (a = 0) and one iteration sends (1 − cos π/4)/2 forward,
     // cos(π/4)/4 to each side, in a non-absorbing medium.
-    let m = cube(2.0, 0.0, 0.0);
+    let m = unit_cube(RgbMedium::grey(2.0, 0.0, 0.0));
     let grid = Grid::new(&m, DVec3::Z, [3, 3, 3], &NoOccluder).unwrap();
     let l = DirectionalLight { direction: DVec3::Z, irradiance: [1.0; 3] };
     let p0 = propagate(&grid, &l, &NoOccluder, &FlowTable::exact(3), &settings(0), Observer::ThetaBins(1));
@@ -139,7 +136,7 @@ fn isotropic_medium_spreads_the_seed_by_the_cone_fractions() {
 fn extremes_stay_finite_and_residuum_converges() {
     let flow = FlowTable::exact(256);
     for &(ss, sa, g) in &[(4.0, 0.0, 0.0), (4.0, 0.0, 0.99), (4.0, 0.0, 0.999), (400.0, 0.0, 0.9), (1e-9, 0.0, 0.5)] {
-        let m = cube(ss, sa, g);
+        let m = unit_cube(RgbMedium::grey(ss, sa, g));
         for dims in [[1, 1, 1], [1, 6, 6], [6, 6, 1], [5, 5, 5]] {
             for d in [DVec3::X, DVec3::NEG_Z, DVec3::Z, DVec3::ONE] {
                 let grid = Grid::new(&m, d, dims, &NoOccluder).unwrap();
@@ -160,8 +157,8 @@ fn extremes_stay_finite_and_residuum_converges() {
             }
         }
     }
-    assert!(Grid::new(&cube(1.0, 0.0, 0.5), DVec3::ZERO, [2, 2, 2], &NoOccluder).is_err());
-    assert!(Grid::new(&cube(1.0, 0.0, 0.5), DVec3::X, [0, 2, 2], &NoOccluder).is_err());
+    assert!(Grid::new(&unit_cube(RgbMedium::grey(1.0, 0.0, 0.5)), DVec3::ZERO, [2, 2, 2], &NoOccluder).is_err());
+    assert!(Grid::new(&unit_cube(RgbMedium::grey(1.0, 0.0, 0.5)), DVec3::X, [0, 2, 2], &NoOccluder).is_err());
     assert_eq!(anisotropy_decay(0.0, 0.0), 1.0);
     assert_eq!(anisotropy_decay(0.0, 1.0), 0.0);
     assert!((anisotropy_decay(0.9, 2.0) - 0.81).abs() < 1e-15);
@@ -179,7 +176,7 @@ fn occluded_links_and_shadowed_cells_carry_nothing() {
             o.x > 0.5 && d.x < 0.0
         }
     }
-    let m = cube(4.0, 0.0, 0.7);
+    let m = unit_cube(RgbMedium::grey(4.0, 0.0, 0.7));
     let grid = Grid::new(&m, DVec3::X, [4, 4, 8], &Wall).unwrap();
     let p = propagate(&grid, &light_x(), &Wall, &FlowTable::exact(64), &settings(100), Observer::ThetaBins(1));
     for n in 0..grid.len() {
@@ -221,7 +218,7 @@ fn results_do_not_depend_on_the_thread_count() {
 #[test]
 fn ray_march_matches_the_closed_form_for_a_constant_source() {
     // A constant toward-eye radiance J in a homogeneous slab: L = J σ_s/σ_t (1 − e^{−σ_t D}).
-    let m = cube(2.0, 1.0, 0.5);
+    let m = unit_cube(RgbMedium::grey(2.0, 1.0, 0.5));
     let grid = Grid::new(&m, DVec3::Z, [3, 3, 3], &NoOccluder).unwrap();
     let j = vec![[1.5, 0.5, 0.0]; grid.len()];
     let cam = ViewCamera::new([0.5, 0.5, -1.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], 0.01, 1, 1).unwrap();

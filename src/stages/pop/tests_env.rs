@@ -18,6 +18,7 @@ use crate::render::color::Rgb;
 use crate::render::environment::{self as env_map, EnvMap, EnvSampler, procedural_sky};
 use crate::render::occluder::NoOccluder;
 use crate::render::voxel::VoxelMedium;
+use crate::render::voxel::unit_cube;
 use crate::tables::pop_preset::ordinates::{cell_quadrature, fibonacci_directions};
 
 const FOUR_PI: f64 = 4.0 * std::f64::consts::PI;
@@ -198,10 +199,6 @@ fn black_and_degenerate_maps_give_no_or_isotropic_ordinates() {
     }
 }
 
-fn cube(sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(sigma_s, sigma_a, g)).unwrap()
-}
-
 fn settings(iterations: usize) -> Settings {
     Settings { iterations, residuum: false, switch_iteration: iterations, residuum_iterations: 0, eps_l: 1e-6 }
 }
@@ -250,7 +247,7 @@ fn inside(cam: &ViewCamera, medium: &VoxelMedium) -> Vec<usize> {
 fn white_furnace_reference_sees_the_environment_radiance_everywhere() {
     // Albedo 1 under a uniform environment L: the radiance field is L in every direction at every point,
     // so scattered + L·T = L along every ray. The path tracer must find it (independent check of it).
-    let medium = cube(3.0, 0.0, 0.7);
+    let medium = unit_cube(RgbMedium::grey(3.0, 0.0, 0.7));
     let env = uniform(16, 8, [1.0, 0.5, 2.0]);
     let cam = camera(8);
     let r = grid_mc::render_environment(
@@ -284,7 +281,7 @@ fn white_furnace_pop_is_exact_in_thin_media_and_overshoots_in_thick_ones() {
     let cam = camera(16);
     let mut excess = Vec::new();
     for (sigma_s, iterations) in [(0.2, 15), (3.0, 15), (3.0, 60)] {
-        let medium = cube(sigma_s, 0.0, 0.7);
+        let medium = unit_cube(RgbMedium::grey(sigma_s, 0.0, 0.7));
         let s = pop_env(&medium, &env, 64, 12, iterations, &cam);
         let t = inside(&cam, &medium);
         let grid = Grid::medium_aligned(&medium, [2; 3]).unwrap();
@@ -309,7 +306,7 @@ fn a_one_texel_environment_renders_like_the_directional_light() {
     let env = EnvMap::new(256, 128, l).unwrap();
     let ords = environment::ordinates(&env, 16, OrdinateSet::Importance);
     assert_eq!(ords.len(), 1);
-    let medium = cube(2.0, 0.2, 0.8);
+    let medium = unit_cube(RgbMedium::grey(2.0, 0.2, 0.8));
     let cam = camera(12);
     let grid = Grid::new(&medium, DVec3::from(ords[0].direction), [10; 3], &NoOccluder).unwrap();
     let flow = FlowTable::exact(128);
@@ -336,7 +333,7 @@ fn pop_under_a_sky_against_path_tracing() {
     // error is lowest: docs/design/pop.md), against the camera path tracer at 12 × 12 px, 1024 paths.
     // Measured (noise-corrected): 4 iterations 41 % (×0.60), 8: 13.7 % (×0.894), 15: 34 % (×1.31),
     // 30: 100 % (×1.94); 8³ grids with 8 iterations 27 %, 32³ with 16 16 %.
-    let medium = cube(4.0, 0.0, 0.7);
+    let medium = unit_cube(RgbMedium::grey(4.0, 0.0, 0.7));
     let env = sky(128, 64);
     let cam = camera(12);
     let pop = pop_env(&medium, &env, 64, 16, 8, &cam);
@@ -390,7 +387,7 @@ fn the_bundled_sky_file_is_the_procedural_sky() {
 fn merging_rotated_grids_reproduces_linear_fields() {
     // Trilinear reads of an oblique grid and a box filter are exact for a linear field away from the
     // faces (where reads clamp): every merged cell holds the sum of the sources at its centre.
-    let medium = cube(1.0, 0.0, 0.0);
+    let medium = unit_cube(RgbMedium::grey(1.0, 0.0, 0.0));
     let src = Grid::new(&medium, DVec3::new(1.0, 2.0, 3.0).normalize(), [12; 3], &NoOccluder).unwrap();
     let f = |p: DVec3| 2.0 + p.x - 0.5 * p.y + 0.25 * p.z;
     let field: Vec<Rgb> = (0..src.len()).map(|i| [f(src.center(src.coords(i))), 1.0, 0.0]).collect();
@@ -420,7 +417,7 @@ fn merged_residuum_hands_the_medium_light_over() {
     // 15 % (×0.849), (b) vs (c) 10.8 % (×0.892), (a) vs (c) 5.1 % (×1.050). Against path tracing
     // (8 × 8 px, 512 paths, noise 0.42) all three overshoot as POP does in thick media
     // (docs/design/pop.md): (a) ×1.76, (b) ×1.49, (c) ×1.67.
-    let medium = cube(20.0, 0.02, 0.95);
+    let medium = unit_cube(RgbMedium::grey(20.0, 0.02, 0.95));
     let env = sky(64, 32);
     let ords = environment::ordinates(&env, 16, OrdinateSet::Importance);
     let cam = camera(8);
@@ -510,7 +507,7 @@ impl crate::render::occluder::Occluder for Window {
 fn importance_puts_the_ordinates_where_the_sky_reaches_the_view() {
     // A cube seen through a 25° window onto the sky: importance (Sec. 5.2) finds the window, so with 8
     // ordinates more of them look through it and the image is closer to path tracing.
-    let medium = cube(2.0, 0.2, 0.5);
+    let medium = unit_cube(RgbMedium::grey(2.0, 0.2, 0.5));
     let env = sky(64, 32);
     let window = Window { axis: DVec3::new(1.0, 0.6, 0.2).normalize(), cos: 25f64.to_radians().cos() };
     let cam = camera(12);

@@ -215,10 +215,8 @@ fn extreme_inputs_stay_finite_and_match_the_cpu() {
     dist.data[3] = f32::INFINITY;
     dist.data[4] = 0.0;
     dist.data[5] = f32::NAN;
-    let homog = |s: f64, a: f64| FogComponent {
-        coefficients: RgbMedium { sigma_s: [s; 3], sigma_a: [a; 3], g: [0.7; 3] },
-        density: Density::Homogeneous,
-    };
+    let homog =
+        |s: f64, a: f64| FogComponent { coefficients: RgbMedium::grey(s, a, 0.7), density: Density::Homogeneous };
     let grazing = FogComponent {
         coefficients: RgbMedium { sigma_s: [0.02, 0.022, 0.025], sigma_a: [0.001; 3], g: [0.5; 3] },
         density: Density::ExponentialHeight {

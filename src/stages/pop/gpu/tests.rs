@@ -9,13 +9,10 @@ use crate::physics::medium::RgbMedium;
 use crate::render::gpu::context::test_gpu;
 use crate::render::occluder::NoOccluder;
 use crate::render::voxel::VoxelMedium;
+use crate::render::voxel::unit_cube;
 use crate::scene::Scene;
 use crate::scene::bvh::SceneBvh;
 use crate::stages::pop::scene::{BvhOccluder, scene_media};
-
-fn cube(sigma_s: f64, sigma_a: f64, g: f64) -> VoxelMedium {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(sigma_s, sigma_a, g)).unwrap()
-}
 
 fn light(d: DVec3) -> DirectionalLight {
     DirectionalLight { direction: d, irradiance: [1.0, 2.0, 0.5] }
@@ -96,7 +93,9 @@ fn same_iterations(c: &Compared) {
 fn fig12_cube_matches_the_cpu_for_each_anisotropy() {
     // elek2014 Fig. 12's cube (σ_s = 4, albedo 1) at the realtime preset's 20³ and 15 iterations.
     for g in [0.0, 0.7, 0.96] {
-        let grid = Grid::new(&cube(4.0, 0.0, g), DVec3::new(0.3, -1.0, 0.2), [20, 20, 20], &NoOccluder).unwrap();
+        let grid =
+            Grid::new(&unit_cube(RgbMedium::grey(4.0, 0.0, g)), DVec3::new(0.3, -1.0, 0.2), [20, 20, 20], &NoOccluder)
+                .unwrap();
         let c = compare(
             &grid,
             &light(grid.axes[2]),
@@ -143,7 +142,7 @@ fn the_window_room_frame_matches_the_cpu() {
 fn the_isotropic_residuum_and_the_stopping_rule_match_the_cpu() {
     // Thick, nearly conservative (σ_s 20, albedo 0.999, g 0.95): Eq. 10 switches to the residuum
     // after m' iterations and ε_L stops it; both decisions are taken on the GPU.
-    let grid = Grid::new(&cube(20.0, 0.02, 0.95), DVec3::Z, [12, 12, 12], &NoOccluder).unwrap();
+    let grid = Grid::new(&unit_cube(RgbMedium::grey(20.0, 0.02, 0.95)), DVec3::Z, [12, 12, 12], &NoOccluder).unwrap();
     let s = Settings { iterations: 400, residuum: true, switch_iteration: 20, residuum_iterations: 300, eps_l: 1e-2 };
     let c = compare(&grid, &light(DVec3::Z), &NoOccluder, &FlowTable::exact(256), &s, DVec3::new(0.5, 0.5, -2.0));
     same_iterations(&c);
@@ -165,13 +164,13 @@ fn extreme_media_and_grids_stay_finite_and_match() {
     // Tolerance 2e-5, except g = 0.999: the phase peak 1/(1 − g)² amplifies the f32 rounding of
     // a·g near 1 (measured 3.0e-5 toward the eye), pinned at 1e-4.
     let cases: Vec<(&str, VoxelMedium, DVec3, [usize; 3])> = vec![
-        ("g 0", cube(4.0, 0.0, 0.0), DVec3::X, [8, 8, 8]),
-        ("g 0.999", cube(4.0, 0.0, 0.999), DVec3::new(1.0, 1.0, 1.0), [8, 8, 8]),
-        ("vacuum", cube(0.0, 0.0, 0.5), DVec3::Y, [4, 4, 4]),
-        ("absorbing", cube(0.0, 5.0, 0.5), DVec3::Z, [4, 4, 4]),
-        ("σ_s 400", cube(400.0, 0.0, 0.9), DVec3::Z, [6, 6, 6]),
-        ("1×1×n", cube(4.0, 1.0, 0.7), DVec3::Z, [1, 1, 16]),
-        ("n×1×1", cube(4.0, 1.0, 0.7), DVec3::Z, [16, 1, 1]),
+        ("g 0", unit_cube(RgbMedium::grey(4.0, 0.0, 0.0)), DVec3::X, [8, 8, 8]),
+        ("g 0.999", unit_cube(RgbMedium::grey(4.0, 0.0, 0.999)), DVec3::new(1.0, 1.0, 1.0), [8, 8, 8]),
+        ("vacuum", unit_cube(RgbMedium::grey(0.0, 0.0, 0.5)), DVec3::Y, [4, 4, 4]),
+        ("absorbing", unit_cube(RgbMedium::grey(0.0, 5.0, 0.5)), DVec3::Z, [4, 4, 4]),
+        ("σ_s 400", unit_cube(RgbMedium::grey(400.0, 0.0, 0.9)), DVec3::Z, [6, 6, 6]),
+        ("1×1×n", unit_cube(RgbMedium::grey(4.0, 1.0, 0.7)), DVec3::Z, [1, 1, 16]),
+        ("n×1×1", unit_cube(RgbMedium::grey(4.0, 1.0, 0.7)), DVec3::Z, [16, 1, 1]),
     ];
     for (name, m, d, dims) in cases {
         let grid = Grid::new(&m, d, dims, &NoOccluder).unwrap();
@@ -199,7 +198,7 @@ fn a_grid_beyond_the_adapters_binding_size_is_refused_clearly() {
     // link factors: 206 MB, above lavapipe's 128 MiB storage binding. The GPU path says which
     // buffer and what the limit is instead of failing inside wgpu. (The 2-D dispatch fold itself is
     // exercised past 4.19 M items by stages::image_fog::gpu's 2600×1700 frame.)
-    let grid = Grid::new(&cube(3.0, 0.5, 0.6), DVec3::Z, [2048, 2100, 1], &NoOccluder).unwrap();
+    let grid = Grid::new(&unit_cube(RgbMedium::grey(3.0, 0.5, 0.6)), DVec3::Z, [2048, 2100, 1], &NoOccluder).unwrap();
     let gpu = test_gpu();
     match super::propagate(
         gpu,
@@ -222,7 +221,7 @@ fn a_grid_beyond_the_adapters_binding_size_is_refused_clearly() {
 
 #[test]
 fn theta_bins_are_refused_not_approximated() {
-    let grid = Grid::new(&cube(1.0, 0.0, 0.5), DVec3::Z, [2, 2, 2], &NoOccluder).unwrap();
+    let grid = Grid::new(&unit_cube(RgbMedium::grey(1.0, 0.0, 0.5)), DVec3::Z, [2, 2, 2], &NoOccluder).unwrap();
     let e = super::propagate(
         test_gpu(),
         &grid,

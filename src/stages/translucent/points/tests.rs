@@ -2,7 +2,8 @@ use super::elimination::*;
 use super::*;
 use crate::render::dielectric::Material;
 use crate::scene::bvh::{SceneBvh, procedural};
-use crate::scene::{Material as SceneMaterial, Mesh, Scene, Surface};
+use crate::scene::fixtures::cuboid;
+use crate::scene::{Material as SceneMaterial, Scene, Surface};
 
 fn mat(sigma: [f64; 3], ior: f64) -> Material {
     Material { sigma_t: sigma, albedo: [0.9; 3], g: 0.0, ior }
@@ -11,29 +12,6 @@ fn mat(sigma: [f64; 3], ior: f64) -> Material {
 fn emitter(center: DVec3, radius: f64, intensity: [f64; 3]) -> Emitter {
     let a = PI * radius * radius;
     Emitter { center, radius, radiance: intensity.map(|i| i / a) }
-}
-
-/// Axis-aligned box with outward counter-clockwise triangles.
-fn cuboid(name: &str, lo: [f32; 3], hi: [f32; 3]) -> Mesh {
-    let c = |i: usize| {
-        [
-            if i & 1 != 0 { hi[0] } else { lo[0] },
-            if i & 2 != 0 { hi[1] } else { lo[1] },
-            if i & 4 != 0 { hi[2] } else { lo[2] },
-        ]
-    };
-    let positions: Vec<[f32; 3]> = (0..8).map(c).collect();
-    let center = DVec3::from_array([0, 1, 2].map(|k| 0.5 * f64::from(lo[k] + hi[k])));
-    let quads = [[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4], [1, 3, 7, 5]];
-    let mut triangles = Vec::new();
-    for q in quads {
-        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
-            let v = t.map(|i| DVec3::from_array(positions[i].map(f64::from)));
-            let out = (v[1] - v[0]).cross(v[2] - v[0]).dot((v[0] + v[1] + v[2]) / 3.0 - center) > 0.0;
-            triangles.push(if out { t.map(|i| i as u32) } else { [t[0] as u32, t[2] as u32, t[1] as u32] });
-        }
-    }
-    procedural::mesh(name, positions, vec![[0.0, 1.0, 0.0]; 8], triangles)
 }
 
 fn opaque(rho: [f64; 3]) -> SceneMaterial {
