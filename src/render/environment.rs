@@ -48,46 +48,106 @@ pub struct EnvMap {
     rotation: Option<DMat3>,
 }
 
+/// An environment map or dome light that cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum EnvMapError {
+    /// A side is 0 or above [`MAX_SIDE`].
+    #[error("environment map is {width} × {height}; each side must be 1 to {MAX_SIDE}")]
+    Size {
+        /// Texels per row.
+        width: usize,
+        /// Rows.
+        height: usize,
+    },
+    /// The texel count does not match the sides.
+    #[error("environment map has {texels} texels, {width} × {height} needs {}", width * height)]
+    Length {
+        /// Texels given.
+        texels: usize,
+        /// Texels per row.
+        width: usize,
+        /// Rows.
+        height: usize,
+    },
+    /// A texel's radiance is negative, NaN or infinite.
+    #[error("environment texel (column {column}, row {row}) is {value:?}; radiance must be finite and non-negative")]
+    Texel {
+        /// Its column.
+        column: usize,
+        /// Its row.
+        row: usize,
+        /// Its radiance.
+        value: Rgb,
+    },
+    /// A tint is negative, NaN or infinite.
+    #[error("environment tint {0:?} must be finite and non-negative")]
+    Tint(Rgb),
+    /// A rotation matrix has a NaN or infinite entry.
+    #[error("environment rotation {0:?} is not finite")]
+    RotationNotFinite([f64; 9]),
+    /// A matrix that is not a rotation.
+    #[error("environment rotation {cols:?} is not orthogonal (|RᵀR − I| = {off:.3e}); give a pure rotation")]
+    NotOrthogonal {
+        /// The matrix, column by column.
+        cols: [f64; 9],
+        /// Largest entry of `|RᵀR − I|`.
+        off: f64,
+    },
+    /// The dome's radiance scale is negative, NaN or infinite.
+    #[error("the dome's radiance scale {0} must be finite and non-negative")]
+    DomeScale(f64),
+    /// The EXR file cannot be read.
+    #[error(transparent)]
+    Read(#[from] crate::image_io::ImageError),
+    /// The EXR file has no `R`, `G`, `B` channels.
+    #[error("{}: the environment map has no R, G, B channels (it has {channels:?})", path.display())]
+    NoRgb {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The channels it has.
+        channels: Vec<String>,
+    },
+    /// The EXR file's texels do not make a valid map.
+    #[error("{}: {source}", path.display())]
+    File {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong with its texels.
+        source: Box<EnvMapError>,
+    },
+}
+
 /// Largest deviation of `RᵀR` from the identity accepted as a rotation by [`EnvMap::with_rotation`].
 const ORTHOGONALITY_TOLERANCE: f64 = 1e-9;
 
 impl EnvMap {
     /// A map from its texels. Errors: a side outside `1..=`[`MAX_SIDE`], a wrong length, a negative,
     /// NaN or infinite radiance (naming the first texel).
-    pub fn new(width: usize, height: usize, radiance: Vec<Rgb>) -> Result<Self, String> {
+    pub fn new(width: usize, height: usize, radiance: Vec<Rgb>) -> Result<Self, EnvMapError> {
         if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
-            return Err(format!("environment map is {width} × {height}; each side must be 1 to {MAX_SIDE}"));
+            return Err(EnvMapError::Size { width, height });
         }
         if radiance.len() != width * height {
-            return Err(format!(
-                "environment map has {} texels, {width} × {height} needs {}",
-                radiance.len(),
-                width * height
-            ));
+            return Err(EnvMapError::Length { texels: radiance.len(), width, height });
         }
         if let Some(i) = radiance.iter().position(|v| v.iter().any(|c| !c.is_finite() || *c < 0.0)) {
-            return Err(format!(
-                "environment texel (column {}, row {}) is {:?}; radiance must be finite and non-negative",
-                i % width,
-                i / width,
-                radiance[i]
-            ));
+            return Err(EnvMapError::Texel { column: i % width, row: i / width, value: radiance[i] });
         }
         Ok(Self { width, height, radiance, rotation: None })
     }
 
     /// A map of `width × height` texels all holding `radiance` (a uniform environment; any rotation
     /// leaves it unchanged).
-    pub fn uniform(width: usize, height: usize, radiance: Rgb) -> Result<Self, String> {
+    pub fn uniform(width: usize, height: usize, radiance: Rgb) -> Result<Self, EnvMapError> {
         // The sides are checked before the texels are allocated.
         let n = if (1..=MAX_SIDE).contains(&width) && (1..=MAX_SIDE).contains(&height) { width * height } else { 0 };
         Self::new(width, height, vec![radiance; n])
     }
 
     /// The map with every texel's radiance multiplied per channel by `tint` (finite, non-negative).
-    pub fn tinted(mut self, tint: Rgb) -> Result<Self, String> {
+    pub fn tinted(mut self, tint: Rgb) -> Result<Self, EnvMapError> {
         if tint.iter().any(|c| !c.is_finite() || *c < 0.0) {
-            return Err(format!("environment tint {tint:?} must be finite and non-negative"));
+            return Err(EnvMapError::Tint(tint));
         }
         for v in &mut self.radiance {
             for c in 0..3 {
@@ -101,17 +161,15 @@ impl EnvMap {
     /// The map placed in the world by `rotation` (world from map, column vectors; module doc), replacing
     /// any earlier rotation. Errors: a matrix that is not finite or not orthogonal (`|RᵀR − I|` above
     /// 1e-9). The identity is stored as no rotation, so an unrotated map behaves bit for bit as before.
-    pub fn with_rotation(mut self, rotation: DMat3) -> Result<Self, String> {
+    pub fn with_rotation(mut self, rotation: DMat3) -> Result<Self, EnvMapError> {
         let cols = rotation.to_cols_array();
         if cols.iter().any(|v| !v.is_finite()) {
-            return Err(format!("environment rotation {cols:?} is not finite"));
+            return Err(EnvMapError::RotationNotFinite(cols));
         }
         let gram = (rotation.transpose() * rotation - DMat3::IDENTITY).to_cols_array();
         let off = gram.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         if off > ORTHOGONALITY_TOLERANCE {
-            return Err(format!(
-                "environment rotation {cols:?} is not orthogonal (|RᵀR − I| = {off:.3e}); give a pure rotation"
-            ));
+            return Err(EnvMapError::NotOrthogonal { cols, off });
         }
         self.rotation = (rotation != DMat3::IDENTITY).then_some(rotation);
         Ok(self)
@@ -133,7 +191,7 @@ impl EnvMap {
     }
 
     /// A map whose texels hold `f` at their centre directions.
-    pub fn from_fn(width: usize, height: usize, f: impl Fn(DVec3) -> Rgb + Sync) -> Result<Self, String> {
+    pub fn from_fn(width: usize, height: usize, f: impl Fn(DVec3) -> Rgb + Sync) -> Result<Self, EnvMapError> {
         let dirs: Vec<DVec3> = (0..width * height)
             .map(|i| direction((i % width) as f64 + 0.5, (i / width) as f64 + 0.5, width, height))
             .collect();
@@ -141,17 +199,15 @@ impl EnvMap {
     }
 
     /// Reads the `R`, `G`, `B` channels of an EXR file, scaled by `intensity`. Errors name the file.
-    pub fn read_exr(path: &Path, intensity: f64) -> Result<Self, String> {
-        let image = crate::image_io::read_exr_rgb(path).map_err(|e| e.to_string())?;
-        let rgb = image.rgb(None).ok_or_else(|| {
-            format!(
-                "{}: the environment map has no R, G, B channels (it has {:?})",
-                path.display(),
-                image.channels.keys()
-            )
+    pub fn read_exr(path: &Path, intensity: f64) -> Result<Self, EnvMapError> {
+        let image = crate::image_io::read_exr_rgb(path)?;
+        let rgb = image.rgb(None).ok_or_else(|| EnvMapError::NoRgb {
+            path: path.to_path_buf(),
+            channels: image.channels.keys().cloned().collect(),
         })?;
         let radiance = rgb.iter().map(|p| p.map(|c| f64::from(c) * intensity)).collect();
-        Self::new(image.width, image.height, radiance).map_err(|e| format!("{}: {e}", path.display()))
+        Self::new(image.width, image.height, radiance)
+            .map_err(|e| EnvMapError::File { path: path.to_path_buf(), source: Box::new(e) })
     }
 
     /// Centre direction of texel `(col, row)`.
@@ -332,9 +388,9 @@ pub const UNIFORM_DOME_SIZE: [usize; 2] = [64, 32];
 /// `color · scale` without a texture, placed by the dome's rotation (the dome's frame uses this module's
 /// convention, so no re-mapping is needed). Errors: the texture's read error (naming the file), or an
 /// invalid scale, colour or rotation.
-pub fn dome_map(dome: &crate::scene::EnvironmentLight) -> Result<EnvMap, String> {
+pub fn dome_map(dome: &crate::scene::EnvironmentLight) -> Result<EnvMap, EnvMapError> {
     if !(dome.scale.is_finite() && dome.scale >= 0.0) {
-        return Err(format!("the dome's radiance scale {} must be finite and non-negative", dome.scale));
+        return Err(EnvMapError::DomeScale(dome.scale));
     }
     let map = match &dome.texture {
         Some(path) => EnvMap::read_exr(path, dome.scale)?.tinted(dome.color)?,

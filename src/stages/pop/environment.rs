@@ -351,10 +351,11 @@ pub fn importance_map(
             sum += wt * (-tau).exp();
         }
         [sum; 3]
-    })?;
+    })
+    .map_err(|e| e.to_string())?;
     let top = map.radiance.iter().map(|v| v[0]).fold(0.0, f64::max);
     let scale = if top > 0.0 { 1.0 / top } else { 0.0 };
-    EnvMap::new(w, h, map.radiance.iter().map(|v| v.map(|c| c * scale)).collect())
+    EnvMap::new(w, h, map.radiance.iter().map(|v| v.map(|c| c * scale)).collect()).map_err(|e| e.to_string())
 }
 
 /// Distance from `p` inside the box along unit `d` to where it leaves (0 outside).

@@ -406,9 +406,9 @@ impl PopRender {
         let mut overridden = None;
         let environment = if !self.environment.is_empty() {
             let path = ctx.base_dir.join(&self.environment);
-            let map = EnvMap::read_exr(&path, self.environment_intensity).map_err(|message| StageError::Input {
+            let map = EnvMap::read_exr(&path, self.environment_intensity).map_err(|e| StageError::Input {
                 stage: id.into(),
-                message,
+                message: e.to_string(),
                 help: "give environment a latitude-longitude RGB EXR map, relative to the pipeline file".into(),
             })?;
             // The stage's map wins over the scene's dome, and says so in `skipped`.
