@@ -183,7 +183,7 @@ pub fn build_table(t: &ValidatedTable, progress: &(dyn Fn(u64) + Sync)) -> Resul
         .def()
         .kind_impl()
         .estimate_errors(&generated, t.key())
-        .map_err(|e| CompileError::Generate { id: t.id().into(), source: GenerateError::Layout(e) })?;
+        .map_err(|e| CompileError::Generate { id: t.id().into(), source: GenerateError::Check(e) })?;
     let check_ms = t_check.elapsed().as_secs_f64() * 1e3;
     // Progress: generation reports its own units; checking and encoding count as much again each.
     progress(t.def().kind_impl().work_units());

@@ -142,7 +142,7 @@ pub fn run(p: &ValidatedPipeline, out_dir: &Path, progress: bool) -> Result<Repo
             let generated: Generated = generated.map_err(|e| rung_err(e.to_string()))?;
             let (enc, encode_ms) = best_time(|| encode_table(&vt, &generated));
             let enc = enc.map_err(|e| rung_err(e.to_string()))?;
-            let errors = vt.def().kind_impl().report_measure(&generated).map_err(rung_err)?;
+            let errors = vt.def().kind_impl().report_measure(&generated).map_err(|e| rung_err(e.to_string()))?;
             let error_max = errors.iter().map(|e| e.1).fold(0.0, f64::max);
             rows.push(Row {
                 budget,

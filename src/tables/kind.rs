@@ -6,7 +6,7 @@
 //! error estimates against the kind's independent reference and the report ladder. [`TableDef`]
 //! reaches the implementation through [`TableDef::kind_impl`], the one match over the kinds.
 
-use super::{Assembled, GenStats, GenerateError, Generated, Progress, TableDef, UnitPart};
+use super::{Assembled, CheckError, GenStats, GenerateError, Generated, Progress, TableDef, UnitPart};
 use crate::tables::FieldIssue;
 
 /// One table kind's behaviour.
@@ -28,13 +28,13 @@ pub trait TableKind: Sync {
     /// Runs the generator. `key` is the content key (seeds random streams).
     fn generate(&self, key: &[u8; 32], progress: Progress<'_>) -> Result<Generated, GenerateError>;
     /// Measures a generated table against the kind's independent reference.
-    fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String>;
+    fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, CheckError>;
     /// Quality budgets for `voltab report`, cheapest first: (label, definition).
     fn report_ladder(&self) -> Vec<(String, TableDef)>;
     /// What the report's error axis means for this kind.
     fn report_error_name(&self) -> &'static str;
     /// Error per curve (e.g. per g) of a generated table, for the report.
-    fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, String>;
+    fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, CheckError>;
 
     /// How many independent work units the generator splits into, for a sharded compile
     /// (`crate::shard`); 1 for kinds that take seconds, not hours (the whole table is one unit).

@@ -121,6 +121,40 @@ pub enum GenerateError {
     /// The generated arrays do not have the kind's layout (a bug in the generator).
     #[error("generated arrays have an unexpected layout: {0}")]
     Layout(String),
+    /// Checking the table against its reference failed.
+    #[error("checking the table against its reference: {0}")]
+    Check(#[from] CheckError),
+}
+
+/// Measuring a generated table against its independent reference failed ([`TableKind::estimate_errors`],
+/// [`TableKind::report_measure`]).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CheckError {
+    /// The generated arrays do not read back as a table of the kind (a bug in the generator).
+    #[error("generated arrays have an unexpected layout: {0}")]
+    Layout(String),
+    /// The backward-walk reference of the lobe tables refused a probe.
+    #[error("the backward-walk reference: {0}")]
+    Adjoint(#[from] crate::reference::beam_adjoint::AdjointError),
+    /// The random-walk reference of the ZH tables refused a probe.
+    #[error("the random-walk reference: {0}")]
+    Walk(#[from] crate::reference::walk::WalkError),
+    /// A lobe table could not answer a probe.
+    #[error("a lobe look-up: {0}")]
+    Lobe(#[from] ms_lobes::LobeQueryError),
+    /// A ZH table could not answer a probe.
+    #[error("a ZH query: {0}")]
+    Zh(#[from] zh_response::QueryError),
+    /// A thread panicked while holding a cache of reference values.
+    #[error("a cache of reference values was poisoned by a panicking thread")]
+    CachePoisoned,
+}
+
+/// The seed of a table's random streams: the first 8 bytes of its content key, little-endian.
+pub(crate) fn key_seed(key: &[u8; 32]) -> u64 {
+    let [b0, b1, b2, b3, b4, b5, b6, b7, ..] = *key;
+    u64::from_le_bytes([b0, b1, b2, b3, b4, b5, b6, b7])
 }
 
 /// Progress callback: called with a number of finished work units.

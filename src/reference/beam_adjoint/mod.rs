@@ -166,6 +166,80 @@ pub struct Estimate {
     pub std_error: f64,
 }
 
+/// An argument outside its domain, or a quadrature that cannot reach its tolerance.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum AdjointError {
+    /// `e2`'s position or direction has a NaN or infinite component.
+    #[error("e2: position {p:?} and direction {omega:?} must be finite")]
+    NotFinite {
+        /// The position.
+        p: [f64; 3],
+        /// The direction.
+        omega: [f64; 3],
+    },
+    /// `e2`'s direction is not a unit vector.
+    #[error("e2: direction {omega:?} is not a unit vector (length {length})")]
+    NotUnit {
+        /// The direction.
+        omega: [f64; 3],
+        /// Its length.
+        length: f64,
+    },
+    /// The point is closer than [`AXIS_MIN`] to the beam axis, where `E_2` diverges.
+    #[error("{function}: distance rho = {rho} from the beam axis is below {AXIS_MIN:e} (E_2 diverges on the axis)")]
+    OnAxis {
+        /// The function asked.
+        function: &'static str,
+        /// The distance from the axis.
+        rho: f64,
+    },
+    /// A probe position with a NaN or infinite coordinate.
+    #[error("probe position rho = {rho}, z = {z} must be finite")]
+    Probe {
+        /// Distance from the axis.
+        rho: f64,
+        /// Depth along the beam.
+        z: f64,
+    },
+    /// A lobe angle outside `[0, π]`.
+    #[error("theta = {0} is out of range: valid range is [0, pi]")]
+    Theta(f64),
+    /// An HG mean cosine outside `(−1, 1)`.
+    #[error("g = {0} is out of range: valid range is (-1, 1)")]
+    G(f64),
+    /// An albedo outside `[0, 1]`.
+    #[error("total_symmetric: albedo = {0} is out of range: valid range is [0, 1]")]
+    Albedo(f64),
+    /// Fewer than two walk samples (no standard error).
+    #[error("total_symmetric: cfg.samples = {0} must be at least 2")]
+    Samples(u64),
+    /// A scattering order the walk does not sum.
+    #[error("total_symmetric: cfg.max_order = {0} is out of range: valid range is [2, {MAX_ORDER}]")]
+    MaxOrder(usize),
+    /// The `ψ` quadrature ran out of panels.
+    #[error("e2: the psi quadrature stalled at {at} after {panels} panels (rho = {rho}, z = {z}, g = {g})")]
+    PsiStalled {
+        /// Where it stalled.
+        at: f64,
+        /// Panels used.
+        panels: usize,
+        /// Distance from the axis.
+        rho: f64,
+        /// Depth along the beam.
+        z: f64,
+        /// HG mean cosine.
+        g: f64,
+    },
+    /// The adaptive `φ` quadrature did not reach its tolerance.
+    #[error("double_symmetric: the phi quadrature did not converge (error {error:e} of {total:e})")]
+    PhiNotConverged {
+        /// Estimated absolute error.
+        error: f64,
+        /// The integral.
+        total: f64,
+    },
+}
+
 /// `E_2(P, ω)` of the module doc (radiance scattered per unit length at `P` toward `ω` by photons
 /// at their second scattering event, non-absorbing medium, unit-power beam), by the `ψ` quadrature.
 ///
@@ -173,19 +247,19 @@ pub struct Estimate {
 /// When a component of `p` or `omega` is not finite, `|g| ≥ 1` (or `g` is not finite),
 /// `||omega| − 1| > 1e-9`, or `P` is closer than [`AXIS_MIN`] to the beam axis (where `E_2`
 /// diverges).
-pub fn e2(p: [f64; 3], omega: [f64; 3], g: f64) -> Result<f64, String> {
+pub fn e2(p: [f64; 3], omega: [f64; 3], g: f64) -> Result<f64, AdjointError> {
     if p.iter().chain(&omega).any(|c| !c.is_finite()) {
-        return Err(format!("e2: position {p:?} and direction {omega:?} must be finite"));
+        return Err(AdjointError::NotFinite { p, omega });
     }
     check_g(g)?;
     let w = DVec3::from_array(omega);
     let len = w.length();
     if (len - 1.0).abs() > UNIT_TOL {
-        return Err(format!("e2: direction {omega:?} is not a unit vector (length {len})"));
+        return Err(AdjointError::NotUnit { omega, length: len });
     }
     let rho = p[0].hypot(p[1]);
     if rho < AXIS_MIN {
-        return Err(format!("e2: distance {rho} from the beam axis is below {AXIS_MIN:e} (E_2 diverges on the axis)"));
+        return Err(AdjointError::OnAxis { function: "e2", rho });
     }
     let w = w / len;
     e2_core(rho, p[2], (p[0] * w.x + p[1] * w.y) / rho, w.z, g)
@@ -198,10 +272,10 @@ pub fn e2(p: [f64; 3], omega: [f64; 3], g: f64) -> Result<f64, String> {
 /// When `rho` or `z` is not finite, `rho < AXIS_MIN` (the double term diverges on the axis),
 /// `theta ∉ [0, π]`, `|g| ≥ 1`, or the adaptive quadrature does not reach `1e-5` relative within
 /// its panel budget.
-pub fn double_symmetric(rho: f64, z: f64, theta: f64, g: f64) -> Result<f64, String> {
+pub fn double_symmetric(rho: f64, z: f64, theta: f64, g: f64) -> Result<f64, AdjointError> {
     check_probe(rho, z, theta, g)?;
     if rho < AXIS_MIN {
-        return Err(format!("double_symmetric: rho = {rho} is below {AXIS_MIN:e} (E_2 diverges on the axis)"));
+        return Err(AdjointError::OnAxis { function: "double_symmetric", rho });
     }
     let lobe = Lobe::new(rho, z, theta);
     let f = |phi: f64| {
@@ -225,22 +299,19 @@ pub fn total_symmetric(
     g: f64,
     albedo: f64,
     cfg: &AdjointConfig,
-) -> Result<Estimate, String> {
+) -> Result<Estimate, AdjointError> {
     check_probe(rho, z, theta, g)?;
     if rho < AXIS_MIN {
-        return Err(format!("total_symmetric: rho = {rho} is below {AXIS_MIN:e} (E_2 diverges on the axis)"));
+        return Err(AdjointError::OnAxis { function: "total_symmetric", rho });
     }
     if !(0.0..=1.0).contains(&albedo) {
-        return Err(format!("total_symmetric: albedo = {albedo} is out of range: valid range is [0, 1]"));
+        return Err(AdjointError::Albedo(albedo));
     }
     if cfg.samples < 2 {
-        return Err(format!("total_symmetric: cfg.samples = {} must be at least 2", cfg.samples));
+        return Err(AdjointError::Samples(cfg.samples));
     }
     if !(2..=MAX_ORDER).contains(&cfg.max_order) {
-        return Err(format!(
-            "total_symmetric: cfg.max_order = {} is out of range: valid range is [2, {MAX_ORDER}]",
-            cfg.max_order
-        ));
+        return Err(AdjointError::MaxOrder(cfg.max_order));
     }
     let walk = Walk {
         rho,
@@ -261,26 +332,26 @@ pub fn total_symmetric(
             }
             Ok(acc)
         })
-        .collect::<Result<Vec<Welford>, String>>()?;
+        .collect::<Result<Vec<Welford>, AdjointError>>()?;
     let acc = parts.iter().fold(Welford::default(), |a, b| a.merge(b));
     let var = if acc.count > 1.0 { acc.m2 / (acc.count - 1.0) } else { 0.0 };
     Ok(Estimate { mean: acc.mean, std_error: (var.max(0.0) / acc.count).sqrt() })
 }
 
 /// Validates the probe arguments shared by the lobe functions.
-fn check_probe(rho: f64, z: f64, theta: f64, g: f64) -> Result<(), String> {
+fn check_probe(rho: f64, z: f64, theta: f64, g: f64) -> Result<(), AdjointError> {
     if !rho.is_finite() || !z.is_finite() {
-        return Err(format!("probe position rho = {rho}, z = {z} must be finite"));
+        return Err(AdjointError::Probe { rho, z });
     }
     if !(0.0..=PI).contains(&theta) {
-        return Err(format!("theta = {theta} is out of range: valid range is [0, pi]"));
+        return Err(AdjointError::Theta(theta));
     }
     check_g(g)
 }
 
 /// Validates an HG mean cosine.
-fn check_g(g: f64) -> Result<(), String> {
-    if g.abs() < 1.0 { Ok(()) } else { Err(format!("g = {g} is out of range: valid range is (-1, 1)")) }
+fn check_g(g: f64) -> Result<(), AdjointError> {
+    if g.abs() < 1.0 { Ok(()) } else { Err(AdjointError::G(g)) }
 }
 
 /// The peak of an HG lobe on the `ψ` axis.
@@ -315,7 +386,7 @@ impl Peak {
 /// `E_2` at distance `rho ≥ AXIS_MIN` from the axis and height `z`, toward the unit direction whose
 /// components along `ê = P_⊥/ρ` and `ẑ` are `w_e`, `w_z` (the out-of-plane component does not
 /// enter). Arguments are trusted (validated by the callers).
-fn e2_core(rho: f64, z: f64, w_e: f64, w_z: f64, g: f64) -> Result<f64, String> {
+fn e2_core(rho: f64, z: f64, w_e: f64, w_z: f64, g: f64) -> Result<f64, AdjointError> {
     let last = Peak::of(w_e.hypot(w_z), w_e.atan2(w_z), g);
     beam_integral(rho, z, g, last, |sin_psi, cos_psi| phase(sin_psi * w_e + cos_psi * w_z, g))
 }
@@ -323,7 +394,7 @@ fn e2_core(rho: f64, z: f64, w_e: f64, w_z: f64, g: f64) -> Result<f64, String> 
 /// `∫ E_2(P, ω) dω = ∫ dz_b e^{−z_b} p(ẑ·ŝ) e^{−r}/r²` (the collision density of second events):
 /// the `ψ` quadrature with the last phase integrated out. Used by the normalisation test.
 #[cfg(test)]
-fn e2_angle_integrated(rho: f64, z: f64, g: f64) -> Result<f64, String> {
+fn e2_angle_integrated(rho: f64, z: f64, g: f64) -> Result<f64, AdjointError> {
     beam_integral(rho, z, g, None, |_, _| 1.0)
 }
 
@@ -338,7 +409,7 @@ fn beam_integral(
     g: f64,
     last_peak: Option<Peak>,
     last: impl Fn(f64, f64) -> f64,
-) -> Result<f64, String> {
+) -> Result<f64, AdjointError> {
     let dist = rho.hypot(z);
     let scale = (-dist).exp() / rho;
     if scale == 0.0 {
@@ -371,16 +442,14 @@ fn beam_integral(
     };
     let rule = psi_rule();
     let mut panels = 0usize;
-    let mut stretch = |lo: f64, hi: f64, upper: bool| -> Result<f64, String> {
+    let mut stretch = |lo: f64, hi: f64, upper: bool| -> Result<f64, AdjointError> {
         let mut sum = 0.0;
         let mut a = lo;
         while a < hi {
             let h = width_at(a, upper);
             let b = if a + h >= hi { hi } else { a + h };
             if b <= a || panels >= MAX_PSI_PANELS {
-                return Err(format!(
-                    "e2: the psi quadrature stalled at {a} after {panels} panels (rho = {rho}, z = {z}, g = {g})"
-                ));
+                return Err(AdjointError::PsiStalled { at: a, panels, rho, z, g });
             }
             let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
             sum += half * rule.iter().map(|&(x, w)| w * integrand(mid + half * x, upper)).sum::<f64>();
@@ -400,7 +469,7 @@ fn beam_integral(
 }
 
 /// Globally adaptive Gauss–Legendre quadrature of `f` over `[0, π]` (see the module doc).
-fn adaptive_phi(f: &dyn Fn(f64) -> Result<f64, String>, g: f64) -> Result<f64, String> {
+fn adaptive_phi(f: &dyn Fn(f64) -> Result<f64, AdjointError>, g: f64) -> Result<f64, AdjointError> {
     /// A panel with its two half-panel estimates.
     struct Seg {
         a: f64,
@@ -410,7 +479,7 @@ fn adaptive_phi(f: &dyn Fn(f64) -> Result<f64, String>, g: f64) -> Result<f64, S
         err: f64,
     }
     let rule = phi_rule();
-    let panel = |a: f64, b: f64| -> Result<f64, String> {
+    let panel = |a: f64, b: f64| -> Result<f64, AdjointError> {
         let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
         let mut s = 0.0;
         for &(x, w) in rule {
@@ -418,7 +487,7 @@ fn adaptive_phi(f: &dyn Fn(f64) -> Result<f64, String>, g: f64) -> Result<f64, S
         }
         Ok(half * s)
     };
-    let seg = |a: f64, b: f64, whole: f64| -> Result<Seg, String> {
+    let seg = |a: f64, b: f64, whole: f64| -> Result<Seg, AdjointError> {
         let m = 0.5 * (a + b);
         let (left, right) = (panel(a, m)?, panel(m, b)?);
         Ok(Seg { a, b, left, right, err: (whole - (left + right)).abs() })
@@ -439,7 +508,7 @@ fn adaptive_phi(f: &dyn Fn(f64) -> Result<f64, String>, g: f64) -> Result<f64, S
             if err <= PHI_ACCEPT * total.abs() {
                 return Ok(total);
             }
-            return Err(format!("double_symmetric: the phi quadrature did not converge (error {err:e} of {total:e})"));
+            return Err(AdjointError::PhiNotConverged { error: err, total });
         }
         let worst = segs.iter().enumerate().fold(0, |k, (i, s)| if s.err > segs[k].err { i } else { k });
         let s = segs.swap_remove(worst);
@@ -503,7 +572,7 @@ struct Walk {
 
 impl Walk {
     /// Score of sample `i`: `Σ_j α^{j+2} E_2(y_j, d_j)` along one backward path.
-    fn sample(&self, i: u64) -> Result<f64, String> {
+    fn sample(&self, i: u64) -> Result<f64, AdjointError> {
         let a = self.albedo;
         let mut d = self.lobe.direction(TAU * self.key.uniform(i, 0));
         let mut y = DVec3::new(self.rho, 0.0, self.z);

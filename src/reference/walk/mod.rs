@@ -192,6 +192,44 @@ pub struct WalkResult {
     pub nonfinite_discarded: u64,
 }
 
+/// A walk argument outside its valid range.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum WalkError {
+    /// A scalar outside `[lo, hi]` (or NaN).
+    #[error("{name} = {value} is out of range: valid range is [{lo:e}, {hi:e}]")]
+    Range {
+        /// The argument.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// Smallest accepted value.
+        lo: f64,
+        /// Largest accepted value.
+        hi: f64,
+    },
+    /// A vector with a non-finite component or a length outside `[lo, hi]`.
+    #[error("{name} = {value:?} is out of range: valid range is finite components with length in [{lo:e}, {hi:e}]")]
+    Vector {
+        /// The argument.
+        name: &'static str,
+        /// Its value.
+        value: [f64; 3],
+        /// Smallest accepted length.
+        lo: f64,
+        /// Largest accepted length.
+        hi: f64,
+    },
+    /// `|g| ≥ 1` or NaN.
+    #[error("medium.g = {0} is out of range: valid range is the open interval (-1, 1)")]
+    G(f64),
+    /// A photon count outside `[64, 2^48]`.
+    #[error("cfg.photons = {0} is out of range: valid range is [64, 2^48]")]
+    Photons(u64),
+    /// More than 1000 scattering orders.
+    #[error("cfg.max_order = {0} is out of range: valid range is [0, 1000]")]
+    MaxOrder(usize),
+}
+
 /// Irradiance at the origin with receiver normal `normal` (any finite non-zero vector; normalised),
 /// split by scattering order. Errors name the offending parameter and its valid range.
 pub fn irradiance(
@@ -199,18 +237,18 @@ pub fn irradiance(
     medium: &Medium,
     normal: [f64; 3],
     cfg: &WalkConfig,
-) -> Result<WalkResult, String> {
+) -> Result<WalkResult, WalkError> {
     let sigma_s = in_range("medium.sigma_s", medium.sigma_s, 0.0, 1e100)?;
     let sigma_a = in_range("medium.sigma_a", medium.sigma_a, 0.0, 1e100)?;
     if medium.g.is_nan() || medium.g.abs() >= 1.0 {
-        return Err(format!("medium.g = {} is out of range: valid range is the open interval (-1, 1)", medium.g));
+        return Err(WalkError::G(medium.g));
     }
     let n = unit("normal", DVec3::from_array(normal), 1e-150, 1e150)?;
     if !(64..=1u64 << 48).contains(&cfg.photons) {
-        return Err(format!("cfg.photons = {} is out of range: valid range is [64, 2^48]", cfg.photons));
+        return Err(WalkError::Photons(cfg.photons));
     }
     if cfg.max_order > 1000 {
-        return Err(format!("cfg.max_order = {} is out of range: valid range is [0, 1000]", cfg.max_order));
+        return Err(WalkError::MaxOrder(cfg.max_order));
     }
     let far = in_range("cfg.far_mfp", cfg.far_mfp, 1.0, 1e4)?;
     let sigma_t = sigma_s + sigma_a;
@@ -324,27 +362,22 @@ fn poisson_cdf(tau: f64, k: usize) -> f64 {
 }
 
 /// `v` if it lies in `[lo, hi]`, else an error naming `name` and the range.
-fn in_range(name: &str, v: f64, lo: f64, hi: f64) -> Result<f64, String> {
-    if (lo..=hi).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("{name} = {v} is out of range: valid range is [{lo:e}, {hi:e}]"))
-    }
+fn in_range(name: &'static str, v: f64, lo: f64, hi: f64) -> Result<f64, WalkError> {
+    if (lo..=hi).contains(&v) { Ok(v) } else { Err(WalkError::Range { name, value: v, lo, hi }) }
 }
 
 /// Euclidean norm of a finite vector if it lies in `[lo, hi]`, else an error naming `name`.
-fn norm3(name: &str, v: DVec3, lo: f64, hi: f64) -> Result<f64, String> {
+fn norm3(name: &'static str, v: DVec3, lo: f64, hi: f64) -> Result<f64, WalkError> {
     let len = v.length();
     if v.is_finite() && (lo..=hi).contains(&len) {
         Ok(len)
     } else {
-        let v = v.to_array();
-        Err(format!("{name} = {v:?} is out of range: valid range is finite components with length in [{lo:e}, {hi:e}]"))
+        Err(WalkError::Vector { name, value: v.to_array(), lo, hi })
     }
 }
 
 /// `v` normalised (divided by its length), if finite with length in `[lo, hi]`, else an error naming `name`.
-fn unit(name: &str, v: DVec3, lo: f64, hi: f64) -> Result<DVec3, String> {
+fn unit(name: &'static str, v: DVec3, lo: f64, hi: f64) -> Result<DVec3, WalkError> {
     let len = norm3(name, v, lo, hi)?;
     Ok(v / len)
 }

@@ -450,7 +450,7 @@ fn bad_parameters_are_rejected_by_name() {
     let medium = Medium { sigma_s: 1.0, sigma_a: 0.1, g: 0.2 };
     let point = Emitter::Point { intensity: 1.0, position: [0.0, 0.0, 1.0] };
     let cfg = WalkConfig::new(1000, 3, 1);
-    let cases: Vec<(&str, Result<WalkResult, String>)> = vec![
+    let cases: Vec<(&str, Result<WalkResult, WalkError>)> = vec![
         ("medium.g", irradiance(&point, &Medium { g: 1.0, ..medium }, [0.0, 0.0, 1.0], &cfg)),
         ("medium.g", irradiance(&point, &Medium { g: f64::NAN, ..medium }, [0.0, 0.0, 1.0], &cfg)),
         ("medium.sigma_s", irradiance(&point, &Medium { sigma_s: -1.0, ..medium }, [0.0, 0.0, 1.0], &cfg)),
@@ -515,7 +515,7 @@ fn bad_parameters_are_rejected_by_name() {
         ("cfg.far_mfp", irradiance(&point, &medium, [0.0, 0.0, 1.0], &WalkConfig { far_mfp: 0.5, ..cfg })),
     ];
     for (name, result) in cases {
-        let err = result.expect_err(name);
+        let err = result.expect_err(name).to_string();
         assert!(err.starts_with(name) && err.contains("valid range"), "{name}: {err}");
     }
 }

@@ -4,6 +4,7 @@
 //! symmetric-lobe approximation's error (wang2018 Sec. 4.1, Fig. 8).
 
 use super::*;
+use crate::reference::beam_adjoint::AdjointError;
 
 /// Points `(ρ, z)` at which the sidecar reports the closure's share of the density.
 pub const REMAINDER_POINTS: [(f64, f64); 4] = [(1.0, 2.0), (5.0, 5.0), (10.0, 10.0), (20.0, 20.0)];
@@ -60,8 +61,8 @@ type AdjointRef = (f64, f64);
 pub(super) fn compare(
     def: &MsLobes,
     table: &MsLobesTable,
-    reference: &dyn Fn(f64, f64, f64, f64, f64) -> Result<AdjointRef, String>,
-) -> Result<Comparison, String> {
+    reference: &dyn Fn(f64, f64, f64, f64, f64) -> Result<AdjointRef, CheckError>,
+) -> Result<Comparison, CheckError> {
     use crate::reference::beam_adjoint;
     let mut c = Comparison { double_hits: f64::INFINITY, ..Comparison::default() };
     let albedo = probe_albedo(def);
@@ -72,13 +73,10 @@ pub(super) fn compare(
             for theta in PROBE_THETAS {
                 let ((rc, zc), want) =
                     cell_average(def, rho, z, &|r, zz| beam_adjoint::double_symmetric(r, zz, theta, g))?;
-                let got = table
-                    .double_lobe(&LobeQuery { albedo, g, rho: rc, z: zc, theta, phi: 0.0 })
-                    .map_err(|e| e.to_string())?;
+                let got = table.double_lobe(&LobeQuery { albedo, g, rho: rc, z: zc, theta, phi: 0.0 })?;
                 c.double_rel = c.double_rel.max((got - want).abs() / want);
             }
-            c.double_hits =
-                c.double_hits.min(expected_second_collisions(def, table, g, rho, z).map_err(|e| e.to_string())?);
+            c.double_hits = c.double_hits.min(expected_second_collisions(def, table, g, rho, z)?);
             // Totals only where the backward walk's heavy tail is tame (|g| <= 0.7: at g = 0.9 its
             // scores near the beam axis make seeds disagree by 2x).
             if g.abs() > 0.7 {
@@ -86,7 +84,7 @@ pub(super) fn compare(
             }
             let theta = std::f64::consts::FRAC_PI_2;
             let (mean, se) = reference(rho, z, theta, g, albedo)?;
-            let got = table.lobe(&LobeQuery { albedo, g, rho, z, theta, phi: 0.0 }).map_err(|e| e.to_string())?.total;
+            let got = table.lobe(&LobeQuery { albedo, g, rho, z, theta, phi: 0.0 })?.total;
             c.total_rel = c.total_rel.max((got - mean).abs() / mean);
             c.total_z = c.total_z.max((got - mean).abs() / se.max(f64::MIN_POSITIVE));
             c.ref_rel_noise = c.ref_rel_noise.max(se / mean);
@@ -129,12 +127,12 @@ pub fn cell_average(
     def: &MsLobes,
     rho: f64,
     z: f64,
-    f: &dyn Fn(f64, f64) -> Result<f64, String>,
-) -> Result<((f64, f64), f64), String> {
+    f: &dyn Fn(f64, f64) -> Result<f64, AdjointError>,
+) -> Result<((f64, f64), f64), CheckError> {
     let (ra, za) = (def.rho_axis(), def.z_axis());
     let (ir, iz) = match (ra.cell(rho), za.cell(z)) {
         (Some(a), Some(b)) => (a, b),
-        _ => return Err(format!("({rho}, {z}) is outside the grid")),
+        _ => return Err(LobeQueryError::Invalid(format!("({rho}, {z}) is outside the grid")).into()),
     };
     let (r0, r1, z0, z1) = (ra.edge(ir), ra.edge(ir + 1), za.edge(iz), za.edge(iz + 1));
     let gl = crate::physics::sh::gauss_legendre(3);
@@ -154,7 +152,7 @@ pub(super) fn adjoint(
     samples: u64,
     seed: u64,
     max_order: usize,
-) -> impl Fn(f64, f64, f64, f64, f64) -> Result<AdjointRef, String> {
+) -> impl Fn(f64, f64, f64, f64, f64) -> Result<AdjointRef, CheckError> {
     move |rho, z, theta, g, albedo| {
         let cfg = crate::reference::beam_adjoint::AdjointConfig { samples, max_order, seed };
         let e = crate::reference::beam_adjoint::total_symmetric(rho, z, theta, g, albedo, &cfg)?;
@@ -165,16 +163,16 @@ pub(super) fn adjoint(
 /// Cached report references keyed by (ρ, z, θ, g, α, max_order) bits.
 type RefCache = std::sync::Mutex<std::collections::HashMap<[u64; 6], AdjointRef>>;
 
-pub(super) fn cached_adjoint(max_order: usize) -> impl Fn(f64, f64, f64, f64, f64) -> Result<AdjointRef, String> {
+pub(super) fn cached_adjoint(max_order: usize) -> impl Fn(f64, f64, f64, f64, f64) -> Result<AdjointRef, CheckError> {
     static CACHE: std::sync::OnceLock<RefCache> = std::sync::OnceLock::new();
     move |rho, z, theta, g, albedo| {
         let cache = CACHE.get_or_init(Default::default);
         let key = [rho.to_bits(), z.to_bits(), theta.to_bits(), g.to_bits(), albedo.to_bits(), max_order as u64];
-        if let Some(v) = cache.lock().map_err(|_| "reference cache poisoned".to_string())?.get(&key) {
+        if let Some(v) = cache.lock().map_err(|_| CheckError::CachePoisoned)?.get(&key) {
             return Ok(*v);
         }
         let v = adjoint(REPORT_ADJOINT_SAMPLES, 0x3a6e_2018, max_order)(rho, z, theta, g, albedo)?;
-        cache.lock().map_err(|_| "reference cache poisoned".to_string())?.insert(key, v);
+        cache.lock().map_err(|_| CheckError::CachePoisoned)?.insert(key, v);
         Ok(v)
     }
 }
@@ -205,16 +203,16 @@ impl MsLobes {
     /// Error estimates (sidecar): `E_2` against the deterministic quadrature and totals against the
     /// backward walk of [`crate::reference::beam_adjoint`] at [`PROBES`], for the first and last g slices;
     /// conservation at the largest albedo node ≤ 0.5; the closure's share (from the generator).
-    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
+    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, CheckError> {
         self.estimate_errors_with(generated, key, &[])
     }
 
     /// The backward-walk references [`MsLobes::estimate_errors`] compares the table with, computed in
     /// parallel: a work unit of its own in a sharded compile (it needs the definition only, not the
     /// table). Each value is keyed by the bits of its (ρ, z, θ, g, α).
-    pub fn check_references(&self, key: &[u8; 32]) -> Result<Vec<CheckReference>, String> {
+    pub fn check_references(&self, key: &[u8; 32]) -> Result<Vec<CheckReference>, CheckError> {
         use rayon::prelude::*;
-        let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
+        let seed = super::super::key_seed(key);
         let albedo = probe_albedo(self);
         let theta = std::f64::consts::FRAC_PI_2;
         let points: Vec<[f64; 5]> = probe_gs(self)
@@ -236,9 +234,10 @@ impl MsLobes {
         generated: &Generated,
         key: &[u8; 32],
         known: &[CheckReference],
-    ) -> Result<GenStats, String> {
-        let table = MsLobesTable::from_arrays(self, &generated.arrays, &generated.values)?;
-        let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
+    ) -> Result<GenStats, CheckError> {
+        let table =
+            MsLobesTable::from_arrays(self, &generated.arrays, &generated.values).map_err(CheckError::Layout)?;
+        let seed = super::super::key_seed(key);
         let compute = adjoint(SIDECAR_ADJOINT_SAMPLES, seed, 400);
         let reference = |rho: f64, z: f64, theta: f64, g: f64, albedo: f64| {
             let at = [rho, z, theta, g, albedo].map(f64::to_bits);
@@ -287,7 +286,7 @@ impl MsLobes {
             let mut worst = 0.0f64;
             let mut worst_law = 0.0f64;
             for gi in 0..self.g_values().len() {
-                let (integral, tallied) = conservation(self, &table, gi, ai).map_err(|e| e.to_string())?;
+                let (integral, tallied) = conservation(self, &table, gi, ai)?;
                 worst = worst.max((integral / tallied - 1.0).abs());
                 worst_law = worst_law.max((integral / (a * a / (1.0 - a)) - 1.0).abs());
             }
@@ -311,7 +310,7 @@ impl MsLobes {
             let mut worst = 0.0f64;
             for g in probe_gs(self) {
                 for (rho, z) in probes(self) {
-                    worst = worst.max(symmetry_error(&table, albedo, g, rho, z).map_err(|e| e.to_string())?.1);
+                    worst = worst.max(symmetry_error(&table, albedo, g, rho, z)?.1);
                 }
             }
             errors.push(ErrorEstimate {
@@ -342,8 +341,9 @@ impl MsLobes {
     }
 
     /// Curves of the report: `E_2` against the quadrature, totals against the cached backward walk.
-    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, String> {
-        let table = MsLobesTable::from_arrays(self, &generated.arrays, &generated.values)?;
+    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, CheckError> {
+        let table =
+            MsLobesTable::from_arrays(self, &generated.arrays, &generated.values).map_err(CheckError::Layout)?;
         let c = compare(self, &table, &cached_adjoint(400))?;
         Ok(vec![("double (E_2) vs quadrature".into(), c.double_rel), ("total vs backward walk".into(), c.total_rel)])
     }

@@ -49,7 +49,7 @@ pub use slice::LobeSlice;
 pub use table::{LobeQuery, LobeQueryError, LobeValue, LobesReadError, MediumChannel, MsLobesTable};
 
 use super::phase_hg::Element;
-use super::{ErrorEstimate, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
+use super::{CheckError, ErrorEstimate, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
 use crate::container::{ArrayDesc, Axis, Quantization};
 use crate::physics::lobe_transport::{self, GradedAxis, LobeConfig, LobeShape};
 use crate::physics::rng::StreamKey;
@@ -672,7 +672,7 @@ impl super::TableKind for MsLobes {
     ) -> Result<super::Generated, super::GenerateError> {
         MsLobes::generate(self, key, progress)
     }
-    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, String> {
+    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, CheckError> {
         MsLobes::estimate_errors(self, generated, key)
     }
     fn report_ladder(&self) -> Vec<(String, super::TableDef)> {
@@ -681,7 +681,7 @@ impl super::TableKind for MsLobes {
     fn report_error_name(&self) -> &'static str {
         "max relative error of the lobes vs the beam quadrature (E_2) and the backward-walk reference (total)"
     }
-    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, String> {
+    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, CheckError> {
         MsLobes::report_measure(self, generated)
     }
 
@@ -697,7 +697,7 @@ impl super::TableKind for MsLobes {
         progress: super::Progress<'_>,
     ) -> Result<super::UnitPart, super::GenerateError> {
         if unit == self.g_values().len() * self.photon_units() {
-            return self.check_references(key).map(super::UnitPart::MsLobesCheck).map_err(super::GenerateError::Layout);
+            return self.check_references(key).map(super::UnitPart::MsLobesCheck).map_err(super::GenerateError::Check);
         }
         let (slice, batch) = (unit / self.photon_units(), unit % self.photon_units());
         self.generate_batch(slice, batch, key, progress).map(|tally| super::UnitPart::MsLobesPhotons { slice, tally })
@@ -719,7 +719,7 @@ impl super::TableKind for MsLobes {
             .collect::<Result<Vec<_>, _>>()?;
         let mut generated = MsLobes::assemble(self, slices)?;
         let t0 = std::time::Instant::now();
-        generated.stats = self.estimate_errors_with(&generated, key, &refs).map_err(super::GenerateError::Layout)?;
+        generated.stats = self.estimate_errors_with(&generated, key, &refs)?;
         Ok(super::Assembled { generated, check_ms: t0.elapsed().as_secs_f64() * 1e3 })
     }
 }

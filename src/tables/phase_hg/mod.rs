@@ -19,7 +19,7 @@ mod table;
 
 pub use table::{ARRAYS, PhaseHgReadError, PhaseHgTable, SAMPLER_CHECK_SAMPLES, lerp_on};
 
-use super::{FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
+use super::{CheckError, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
 use crate::container::{ArrayDesc, ArrayValues, Axis, ElementType, Quantization};
 use crate::physics::hg;
 
@@ -336,8 +336,8 @@ impl PhaseHg {
 
 impl PhaseHg {
     /// Error estimates of a generated table against the independent reference (sidecar, report).
-    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
-        let table = PhaseHgTable::from_arrays(&generated.arrays, &generated.values)?;
+    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, CheckError> {
+        let table = PhaseHgTable::from_arrays(&generated.arrays, &generated.values).map_err(CheckError::Layout)?;
         Ok(GenStats {
             nonfinite_discarded: generated.stats.nonfinite_discarded,
             samples: SAMPLER_CHECK_SAMPLES * table.g.len() as u64,
@@ -356,8 +356,8 @@ impl PhaseHg {
     }
 
     /// Error of each g slice's phase lookups (for the report's curves).
-    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, String> {
-        let table = PhaseHgTable::from_arrays(&generated.arrays, &generated.values)?;
+    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, CheckError> {
+        let table = PhaseHgTable::from_arrays(&generated.arrays, &generated.values).map_err(CheckError::Layout)?;
         let errors: Vec<f64> =
             (0..table.g.len()).map(|gi| table.phase_lookup_error(gi, 2048).unwrap_or(f64::INFINITY)).collect();
         let mut curves = vec![("worst over all g".to_owned(), errors.iter().copied().fold(0.0, f64::max))];
@@ -458,7 +458,7 @@ impl super::TableKind for PhaseHg {
     ) -> Result<super::Generated, super::GenerateError> {
         PhaseHg::generate(self, key, progress)
     }
-    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, String> {
+    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, CheckError> {
         PhaseHg::estimate_errors(self, generated, key)
     }
     fn report_ladder(&self) -> Vec<(String, super::TableDef)> {
@@ -467,7 +467,7 @@ impl super::TableKind for PhaseHg {
     fn report_error_name(&self) -> &'static str {
         "max relative error of interpolated phase lookups vs double-double reference"
     }
-    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, String> {
+    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, CheckError> {
         PhaseHg::report_measure(self, generated)
     }
 }

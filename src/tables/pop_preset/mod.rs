@@ -29,7 +29,7 @@ mod tests;
 pub use table::{ARRAYS, MEAN_COSINE_CHECK_SAMPLES, PopPresetTable, flow_reference, lerp_flow};
 
 use super::phase_hg::Element;
-use super::{FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
+use super::{CheckError, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
 use crate::container::{ArrayDesc, Axis};
 use crate::physics::hg;
 
@@ -231,8 +231,9 @@ impl PopPreset {
     }
 
     /// Error estimates of a generated table against the independent references (sidecar, report).
-    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
-        let table = PopPresetTable::from_arrays(self, &generated.arrays, &generated.values)?;
+    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, CheckError> {
+        let table =
+            PopPresetTable::from_arrays(self, &generated.arrays, &generated.values).map_err(CheckError::Layout)?;
         Ok(GenStats {
             nonfinite_discarded: generated.stats.nonfinite_discarded,
             samples: MEAN_COSINE_CHECK_SAMPLES,
@@ -249,8 +250,9 @@ impl PopPreset {
     }
 
     /// Error of the flow table's interpolation (one curve), for the report.
-    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, String> {
-        let table = PopPresetTable::from_arrays(self, &generated.arrays, &generated.values)?;
+    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, CheckError> {
+        let table =
+            PopPresetTable::from_arrays(self, &generated.arrays, &generated.values).map_err(CheckError::Layout)?;
         Ok(vec![("flow interpolation, worst over a".to_owned(), table.flow_interp_error())])
     }
 
@@ -383,7 +385,7 @@ impl super::TableKind for PopPreset {
     ) -> Result<super::Generated, super::GenerateError> {
         PopPreset::generate(self, key, progress)
     }
-    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, String> {
+    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, CheckError> {
         PopPreset::estimate_errors(self, generated, key)
     }
     fn report_ladder(&self) -> Vec<(String, super::TableDef)> {
@@ -392,7 +394,7 @@ impl super::TableKind for PopPreset {
     fn report_error_name(&self) -> &'static str {
         "max absolute error of the interpolated flow fractions [front, side, back] vs the double-double HG cumulative"
     }
-    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, String> {
+    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, CheckError> {
         PopPreset::report_measure(self, generated)
     }
 }

@@ -3,6 +3,7 @@
 //! photon walk of [`crate::reference::walk`] (dubouchet2019 Sec. 4–5), for up to three g slices.
 
 use super::*;
+use crate::reference::walk::WalkError;
 
 /// Photons per walk run in the sidecar error estimate.
 pub const SIDECAR_WALK_PHOTONS: u64 = 1 << 17;
@@ -22,7 +23,7 @@ pub fn walk_reference(
     k_max: usize,
     photons: u64,
     seed: u64,
-) -> Result<(f64, Vec<f64>, Vec<f64>), String> {
+) -> Result<(f64, Vec<f64>, Vec<f64>), WalkError> {
     let alpha = WALK_ALBEDO;
     let emitter = match profile {
         EmitterProfile::Point => walk::Emitter::Point { intensity: 1.0, position: [0.0, 0.0, d] },
@@ -53,15 +54,15 @@ fn cached_reference(
     g: f64,
     d: f64,
     k_max: usize,
-) -> Result<(f64, Vec<f64>, Vec<f64>), String> {
+) -> Result<(f64, Vec<f64>, Vec<f64>), CheckError> {
     static CACHE: OnceLock<RefCache> = OnceLock::new();
     let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
     let key = (profile, g.to_bits(), d.to_bits(), k_max);
-    if let Some(v) = cache.lock().map_err(|_| "reference cache poisoned".to_string())?.get(&key) {
+    if let Some(v) = cache.lock().map_err(|_| CheckError::CachePoisoned)?.get(&key) {
         return Ok(v.clone());
     }
     let v = walk_reference(profile, g, d, k_max, REPORT_WALK_PHOTONS, 0x5eed_2019)?;
-    cache.lock().map_err(|_| "reference cache poisoned".to_string())?.insert(key, v.clone());
+    cache.lock().map_err(|_| CheckError::CachePoisoned)?.insert(key, v.clone());
     Ok(v)
 }
 
@@ -72,7 +73,7 @@ fn compare(
     g: f64,
     d: f64,
     reference: &(f64, Vec<f64>, Vec<f64>),
-) -> Result<(f64, f64), String> {
+) -> Result<(f64, f64), CheckError> {
     let medium = HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.0, g };
     let opts = QueryOptions { backscatter: false, tail: false, similarity: false, max_bounce: None };
     let emitter = match profile {
@@ -83,7 +84,7 @@ fn compare(
         EmitterProfile::Area => Emitter::Area { intensity: 1.0, position: [0.0, 0.0, d], normal: [0.0, 0.0, -1.0] },
     };
     let receiver = Receiver { position: [0.0; 3], normal: [0.0, 0.0, 1.0] };
-    let got = table.irradiance(&medium, &emitter, &receiver, &opts).map_err(|e| e.to_string())?;
+    let got = table.irradiance(&medium, &emitter, &receiver, &opts)?;
     let (direct, means, _) = reference;
     let single_ref = means[0];
     let total_ref = direct + means.iter().sum::<f64>();
@@ -101,15 +102,15 @@ impl ZhResponse {
 
     /// Error estimates against the walk (sidecar): single scattering and the sum of orders `≤ B` on a
     /// facing receiver at d ∈ {0.5, 2} mean free paths, per emitter, for up to three g slices.
-    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, String> {
+    pub fn estimate_errors(&self, generated: &Generated, key: &[u8; 32]) -> Result<GenStats, CheckError> {
         self.estimate_errors_with(generated, key, &[])
     }
 
     /// The walk references [`ZhResponse::estimate_errors`] compares with, computed in parallel: a work
     /// unit of a sharded compile (they need the definition only). Keyed by (emitter, g bits, d bits).
-    pub fn check_references(&self, key: &[u8; 32]) -> Result<Vec<WalkReference>, String> {
+    pub fn check_references(&self, key: &[u8; 32]) -> Result<Vec<WalkReference>, CheckError> {
         use rayon::prelude::*;
-        let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
+        let seed = super::super::key_seed(key);
         let cases: Vec<(EmitterProfile, f64, f64)> = self
             .emitters
             .iter()
@@ -130,9 +131,10 @@ impl ZhResponse {
         generated: &Generated,
         key: &[u8; 32],
         known: &[WalkReference],
-    ) -> Result<GenStats, String> {
-        let table = ZhResponseTable::from_arrays(self, &generated.arrays, &generated.values)?;
-        let seed = u64::from_le_bytes(key[..8].try_into().map_err(|_| "short key".to_string())?);
+    ) -> Result<GenStats, CheckError> {
+        let table =
+            ZhResponseTable::from_arrays(self, &generated.arrays, &generated.values).map_err(CheckError::Layout)?;
+        let seed = super::super::key_seed(key);
         let mut noise = 0.0f64;
         let mut photons = 0u64;
         let mut errors = Vec::new();
@@ -195,8 +197,9 @@ impl ZhResponse {
 
     /// Per emitter: the worst relative error of single scattering and of the orders `≤ B` against the
     /// walk ([`REPORT_WALK_PHOTONS`] photons), over the probe g slices and [`REPORT_DISTANCES`].
-    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, String> {
-        let table = ZhResponseTable::from_arrays(self, &generated.arrays, &generated.values)?;
+    pub fn report_measure(&self, generated: &Generated) -> Result<Vec<(String, f64)>, CheckError> {
+        let table =
+            ZhResponseTable::from_arrays(self, &generated.arrays, &generated.values).map_err(CheckError::Layout)?;
         let mut curves = Vec::new();
         for &profile in &self.emitters {
             let (mut single, mut total) = (0.0f64, 0.0f64);

@@ -43,7 +43,7 @@ pub use table::{
 };
 
 use super::phase_hg::{Element, GValues};
-use super::{ErrorEstimate, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
+use super::{CheckError, ErrorEstimate, FieldIssue, GenStats, GenerateError, Generated, Progress, to_element};
 use crate::container::{ArrayDesc, Axis};
 use crate::physics::medium::HomogeneousMedium;
 use crate::physics::zh_transport::{self, EmitterKind, ResponseConfig, tail};
@@ -418,7 +418,7 @@ impl ZhResponse {
     /// [`ZhResponse::generate_unit`] and, as unit [`ZhResponse::unit_count`], the check's references.
     pub fn shard_unit(&self, unit: usize, key: &[u8; 32], progress: Progress<'_>) -> Result<ZhPart, GenerateError> {
         if unit == self.unit_count() {
-            return self.check_references(key).map(ZhPart::Check).map_err(GenerateError::Layout);
+            return self.check_references(key).map(ZhPart::Check).map_err(GenerateError::Check);
         }
         self.generate_unit(unit, progress)
     }
@@ -750,7 +750,7 @@ impl super::TableKind for ZhResponse {
     ) -> Result<super::Generated, super::GenerateError> {
         ZhResponse::generate(self, key, progress)
     }
-    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, String> {
+    fn estimate_errors(&self, generated: &super::Generated, key: &[u8; 32]) -> Result<super::GenStats, CheckError> {
         ZhResponse::estimate_errors(self, generated, key)
     }
     fn report_ladder(&self) -> Vec<(String, super::TableDef)> {
@@ -759,7 +759,7 @@ impl super::TableKind for ZhResponse {
     fn report_error_name(&self) -> &'static str {
         "max relative error of the irradiance on a receiver facing the light vs the random-walk reference"
     }
-    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, String> {
+    fn report_measure(&self, generated: &super::Generated) -> Result<Vec<(String, f64)>, CheckError> {
         ZhResponse::report_measure(self, generated)
     }
 
@@ -786,7 +786,7 @@ impl super::TableKind for ZhResponse {
         }
         let mut generated = ZhResponse::assemble(self, zh)?;
         let t0 = std::time::Instant::now();
-        generated.stats = self.estimate_errors_with(&generated, key, &refs).map_err(super::GenerateError::Layout)?;
+        generated.stats = self.estimate_errors_with(&generated, key, &refs)?;
         Ok(super::Assembled { generated, check_ms: t0.elapsed().as_secs_f64() * 1e3 })
     }
 }
