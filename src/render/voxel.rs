@@ -31,6 +31,137 @@ pub struct VoxelMedium {
     pub coefficients: RgbMedium,
 }
 
+/// A voxel medium that cannot be built, or a density volume that cannot be read (file errors name the
+/// file or folder).
+#[derive(Debug, thiserror::Error)]
+pub enum VoxelError {
+    /// The box is empty, inverted or not finite.
+    #[error("the medium box {min} – {max} is empty or not finite; give max > min on every axis")]
+    Box {
+        /// Lower corner.
+        min: DVec3,
+        /// Upper corner.
+        max: DVec3,
+    },
+    /// An axis without voxels.
+    #[error("voxel dimensions {0:?} contain 0; every axis needs at least one voxel")]
+    ZeroDims([usize; 3]),
+    /// The density count does not match the dimensions.
+    #[error("{got} densities for {dims:?} voxels; the volume needs {} (x fastest, then y, then z)", dims.iter().product::<usize>())]
+    Count {
+        /// Densities given.
+        got: usize,
+        /// Voxels per axis.
+        dims: [usize; 3],
+    },
+    /// A negative, NaN or infinite density.
+    #[error("voxel {voxel} has density {value}; densities must be finite and ≥ 0")]
+    Density {
+        /// Flat voxel index.
+        voxel: usize,
+        /// Its density.
+        value: f32,
+    },
+    /// A negative, NaN or infinite coefficient.
+    #[error("channel {channel}: σ_s = {sigma_s}, σ_a = {sigma_a}; coefficients must be finite and ≥ 0 (1/m)")]
+    Coefficient {
+        /// Colour channel.
+        channel: usize,
+        /// Its scattering coefficient.
+        sigma_s: f64,
+        /// Its absorption coefficient.
+        sigma_a: f64,
+    },
+    /// g outside `[0, 1)`.
+    #[error("channel {channel}: g = {g}; POP propagates forward-scattering media, g in [0, 1)")]
+    G {
+        /// Colour channel.
+        channel: usize,
+        /// Its HG mean cosine.
+        g: f64,
+    },
+    /// A file or folder that cannot be read.
+    #[error("{}: cannot read the {what}: {source}", path.display())]
+    Io {
+        /// The file or folder.
+        path: std::path::PathBuf,
+        /// `"density volume"` or `"slice folder"`.
+        what: &'static str,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// A raw volume of the wrong size.
+    #[error("{}: {bytes} bytes, but {dims:?} voxels of little-endian f32 need {}; check `dims` or the file", path.display(), 4 * dims.iter().product::<usize>())]
+    RawSize {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Its size.
+        bytes: usize,
+        /// Voxels per axis.
+        dims: [usize; 3],
+    },
+    /// A slice folder without `.exr` files.
+    #[error("{}: no .exr slices in the folder; put one EXR per z slice there", .0.display())]
+    NoSlices(std::path::PathBuf),
+    /// More slices than [`MAX_SLICE_VOXELS`].
+    #[error("{}: {count} slices; at most {MAX_SLICE_VOXELS}", path.display())]
+    TooManySlices {
+        /// The folder.
+        path: std::path::PathBuf,
+        /// Its slice count.
+        count: usize,
+    },
+    /// A slice that cannot be decoded.
+    #[error(transparent)]
+    Image(#[from] crate::image_io::ImageError),
+    /// A slice without a density channel.
+    #[error("{}: no density channel (looked for density, Y, R, A; the file has {channels:?})", path.display())]
+    NoChannel {
+        /// The slice.
+        path: std::path::PathBuf,
+        /// Its channels.
+        channels: Vec<String>,
+    },
+    /// A slice larger than [`MAX_SLICE_VOXELS`] on a side.
+    #[error("{}: {width} × {height} pixels; slices may be at most {MAX_SLICE_VOXELS} on a side", path.display())]
+    SliceTooLarge {
+        /// The slice.
+        path: std::path::PathBuf,
+        /// Its width.
+        width: usize,
+        /// Its height.
+        height: usize,
+    },
+    /// A slice whose size differs from the first one's.
+    #[error("{}: {width} × {height} pixels, but {} is {} × {}; every slice must have the same size", path.display(), first.display(), first_size[0], first_size[1])]
+    SliceSize {
+        /// The slice.
+        path: std::path::PathBuf,
+        /// Its width.
+        width: usize,
+        /// Its height.
+        height: usize,
+        /// The first slice.
+        first: std::path::PathBuf,
+        /// The first slice's width and height.
+        first_size: [usize; 2],
+    },
+    /// A negative, NaN or infinite density in a slice.
+    #[error("{}: channel {channel} at pixel ({x}, {row}) is {value}; densities must be finite and ≥ 0", path.display())]
+    Pixel {
+        /// The slice.
+        path: std::path::PathBuf,
+        /// The channel read.
+        channel: &'static str,
+        /// Column.
+        x: usize,
+        /// Image row (0 at the top).
+        row: usize,
+        /// The value.
+        value: f32,
+    },
+}
+
 /// A distant light: parallel radiance along one direction (elek2014 Sec. 4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DirectionalLight {
@@ -53,34 +184,28 @@ impl VoxelMedium {
         dims: [usize; 3],
         density: Vec<f32>,
         coefficients: RgbMedium,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, VoxelError> {
         let RgbMedium { sigma_s, sigma_a, g } = coefficients;
         if !(min.is_finite() && max.is_finite()) || (max - min).min_element() <= 0.0 {
-            return Err(format!("the medium box {min} – {max} is empty or not finite; give max > min on every axis"));
+            return Err(VoxelError::Box { min, max });
         }
         if dims.contains(&0) {
-            return Err(format!("voxel dimensions {dims:?} contain 0; every axis needs at least one voxel"));
+            return Err(VoxelError::ZeroDims(dims));
         }
         let n = dims[0].checked_mul(dims[1]).and_then(|v| v.checked_mul(dims[2]));
         if n != Some(density.len()) {
-            return Err(format!(
-                "{} densities for {dims:?} voxels; the volume needs {} (x fastest, then y, then z)",
-                density.len(),
-                dims.iter().product::<usize>()
-            ));
+            return Err(VoxelError::Count { got: density.len(), dims });
         }
-        if let Some((i, d)) = density.iter().enumerate().find(|(_, d)| !(d.is_finite() && **d >= 0.0)) {
-            return Err(format!("voxel {i} has density {d}; densities must be finite and ≥ 0"));
+        if let Some((voxel, &value)) = density.iter().enumerate().find(|(_, d)| !(d.is_finite() && **d >= 0.0)) {
+            return Err(VoxelError::Density { voxel, value });
         }
-        for c in 0..3 {
-            if !(sigma_s[c].is_finite() && sigma_s[c] >= 0.0 && sigma_a[c].is_finite() && sigma_a[c] >= 0.0) {
-                return Err(format!(
-                    "channel {c}: σ_s = {}, σ_a = {}; coefficients must be finite and ≥ 0 (1/m)",
-                    sigma_s[c], sigma_a[c]
-                ));
+        for channel in 0..3 {
+            let (s, a) = (sigma_s[channel], sigma_a[channel]);
+            if !(s.is_finite() && s >= 0.0 && a.is_finite() && a >= 0.0) {
+                return Err(VoxelError::Coefficient { channel, sigma_s: s, sigma_a: a });
             }
-            if !(g[c].is_finite() && (0.0..1.0).contains(&g[c])) {
-                return Err(format!("channel {c}: g = {}; POP propagates forward-scattering media, g in [0, 1)", g[c]));
+            if !(g[channel].is_finite() && (0.0..1.0).contains(&g[channel])) {
+                return Err(VoxelError::G { channel, g: g[channel] });
             }
         }
         Ok(Self { min, max, dims, density, coefficients })
@@ -90,7 +215,7 @@ impl VoxelMedium {
     ///
     /// # Errors
     /// As [`VoxelMedium::new`].
-    pub fn homogeneous(min: DVec3, max: DVec3, coefficients: RgbMedium) -> Result<Self, String> {
+    pub fn homogeneous(min: DVec3, max: DVec3, coefficients: RgbMedium) -> Result<Self, VoxelError> {
         Self::new(min, max, [1, 1, 1], vec![1.0], coefficients)
     }
 
@@ -104,7 +229,7 @@ impl VoxelMedium {
         dims: [usize; 3],
         coefficients: RgbMedium,
         density: impl Fn(DVec3) -> f64,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, VoxelError> {
         let size = (max - min) / DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
         let mut values = Vec::with_capacity(dims.iter().product());
         for z in 0..dims[2] {
@@ -159,16 +284,15 @@ pub(crate) fn unit_cube(coefficients: RgbMedium) -> VoxelMedium {
 ///
 /// # Errors
 /// A message naming the file: missing or unreadable, or a size that is not `4 · x · y · z` bytes.
-pub fn read_raw_density(path: &Path, dims: [usize; 3]) -> Result<Vec<f32>, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("{}: cannot read the density volume: {e}", path.display()))?;
+pub fn read_raw_density(path: &Path, dims: [usize; 3]) -> Result<Vec<f32>, VoxelError> {
+    let bytes = std::fs::read(path).map_err(|source| VoxelError::Io {
+        path: path.to_path_buf(),
+        what: "density volume",
+        source,
+    })?;
     let n: usize = dims.iter().product();
     if bytes.len() != n * 4 {
-        return Err(format!(
-            "{}: {} bytes, but {dims:?} voxels of little-endian f32 need {}; check `dims` or the file",
-            path.display(),
-            bytes.len(),
-            n * 4
-        ));
+        return Err(VoxelError::RawSize { path: path.to_path_buf(), bytes: bytes.len(), dims });
     }
     Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
 }
@@ -186,65 +310,57 @@ pub const MAX_SLICE_VOXELS: usize = 1024;
 /// A message naming the folder or the file: unreadable folder, no `.exr` in it, more than 1024 slices,
 /// an undecodable file, a slice without any of the channels, slices of different sizes or larger than
 /// 1024, and a negative, NaN or infinite density (with its pixel).
-pub fn read_exr_slices(dir: &Path) -> Result<([usize; 3], Vec<f32>), String> {
-    let entries =
-        std::fs::read_dir(dir).map_err(|e| format!("{}: cannot read the slice folder: {e}", dir.display()))?;
+pub fn read_exr_slices(dir: &Path) -> Result<([usize; 3], Vec<f32>), VoxelError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| VoxelError::Io {
+        path: dir.to_path_buf(),
+        what: "slice folder",
+        source,
+    })?;
     let mut files: Vec<std::path::PathBuf> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("exr")))
         .collect();
     files.sort();
     if files.is_empty() {
-        return Err(format!("{}: no .exr slices in the folder; put one EXR per z slice there", dir.display()));
+        return Err(VoxelError::NoSlices(dir.to_path_buf()));
     }
     if files.len() > MAX_SLICE_VOXELS {
-        return Err(format!("{}: {} slices; at most {MAX_SLICE_VOXELS}", dir.display(), files.len()));
+        return Err(VoxelError::TooManySlices { path: dir.to_path_buf(), count: files.len() });
     }
     let mut dims = [0usize, 0, files.len()];
     let mut values = Vec::new();
     for (z, file) in files.iter().enumerate() {
-        let image = crate::image_io::read_exr_rgb(file).map_err(|e| e.to_string())?;
+        let image = crate::image_io::read_exr_rgb(file)?;
         let Some((name, data)) =
             ["density", "Y", "R", "A"].iter().find_map(|c| image.channels.get(*c).map(|d| (*c, d)))
         else {
-            return Err(format!(
-                "{}: no density channel (looked for density, Y, R, A; the file has {:?})",
-                file.display(),
-                image.channels.keys().collect::<Vec<_>>()
-            ));
+            return Err(VoxelError::NoChannel {
+                path: file.clone(),
+                channels: image.channels.keys().cloned().collect(),
+            });
         };
         if z == 0 {
             dims[0] = image.width;
             dims[1] = image.height;
             if image.width > MAX_SLICE_VOXELS || image.height > MAX_SLICE_VOXELS {
-                return Err(format!(
-                    "{}: {} × {} pixels; slices may be at most {MAX_SLICE_VOXELS} on a side",
-                    file.display(),
-                    image.width,
-                    image.height
-                ));
+                return Err(VoxelError::SliceTooLarge { path: file.clone(), width: image.width, height: image.height });
             }
             values.reserve(dims[0] * dims[1] * dims[2]);
         } else if [image.width, image.height] != [dims[0], dims[1]] {
-            return Err(format!(
-                "{}: {} × {} pixels, but {} is {} × {}; every slice must have the same size",
-                file.display(),
-                image.width,
-                image.height,
-                files[0].display(),
-                dims[0],
-                dims[1]
-            ));
+            return Err(VoxelError::SliceSize {
+                path: file.clone(),
+                width: image.width,
+                height: image.height,
+                first: files[0].clone(),
+                first_size: [dims[0], dims[1]],
+            });
         }
         for y in 0..dims[1] {
             let row = dims[1] - 1 - y;
             for x in 0..dims[0] {
                 let v = data[row * dims[0] + x];
                 if !(v.is_finite() && v >= 0.0) {
-                    return Err(format!(
-                        "{}: channel {name} at pixel ({x}, {row}) is {v}; densities must be finite and ≥ 0",
-                        file.display()
-                    ));
+                    return Err(VoxelError::Pixel { path: file.clone(), channel: name, x, row, value: v });
                 }
                 values.push(v);
             }

@@ -31,17 +31,18 @@ fn exr_slices_read_as_the_volume_they_store() {
     // A slice of another size, a negative density and an empty folder are refused, naming the file.
     crate::image_io::write_exr_rgb(&dir.join("s999.exr"), 2, 2, &[[1.0, 0.0, 0.0]; 4], &[]).unwrap();
     let e = read_exr_slices(&dir).unwrap_err();
+    let e = e.to_string();
     assert!(e.contains("s999.exr") && e.contains("same size"), "{e}");
     std::fs::remove_file(dir.join("s999.exr")).unwrap();
     let mut bad = vec![[1.0f32, 0.0, 0.0]; w * h];
     bad[4] = [-2.0, 0.0, 0.0];
     crate::image_io::write_exr_rgb(&dir.join("s002.exr"), w, h, &bad, &[]).unwrap();
-    let e = read_exr_slices(&dir).unwrap_err();
+    let e = read_exr_slices(&dir).unwrap_err().to_string();
     assert!(e.contains("s002.exr") && e.contains("pixel (1, 1)") && e.contains("-2"), "{e}");
     let empty = dir.join("empty");
     std::fs::create_dir_all(&empty).unwrap();
-    assert!(read_exr_slices(&empty).unwrap_err().contains("no .exr slices"));
-    assert!(read_exr_slices(&dir.join("missing")).unwrap_err().contains("cannot read the slice folder"));
+    assert!(read_exr_slices(&empty).unwrap_err().to_string().contains("no .exr slices"));
+    assert!(read_exr_slices(&dir.join("missing")).unwrap_err().to_string().contains("cannot read the slice folder"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -57,7 +58,12 @@ fn voxel_lookup_and_errors() {
     assert_eq!(m.density_at(DVec3::new(2.0, 1.0, 1.0)), 3.0);
     assert_eq!(m.density_at(DVec3::new(2.1, 0.5, 0.5)), 0.0);
     assert_eq!(m.max_density(), 3.0);
-    assert!(VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [2, 1, 1], vec![1.0], coeffs()).unwrap_err().contains("needs 2"));
+    assert!(
+        VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [2, 1, 1], vec![1.0], coeffs())
+            .unwrap_err()
+            .to_string()
+            .contains("needs 2")
+    );
     assert!(VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [1, 1, 1], vec![-1.0], coeffs()).is_err());
     assert!(VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [1, 1, 1], vec![f32::NAN], coeffs()).is_err());
     assert!(VoxelMedium::homogeneous(DVec3::ONE, DVec3::ZERO, coeffs()).is_err());
@@ -74,7 +80,8 @@ fn raw_volume_round_trip_and_size_check() {
     std::fs::write(&p, vals.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>()).unwrap();
     assert_eq!(read_raw_density(&p, [2, 2, 1]).unwrap(), vals.to_vec());
     let e = read_raw_density(&p, [2, 2, 2]).unwrap_err();
+    let e = e.to_string();
     assert!(e.contains("d.raw") && e.contains("32"), "{e}");
-    assert!(read_raw_density(&dir.join("missing.raw"), [1, 1, 1]).unwrap_err().contains("missing.raw"));
+    assert!(read_raw_density(&dir.join("missing.raw"), [1, 1, 1]).unwrap_err().to_string().contains("missing.raw"));
     std::fs::remove_dir_all(&dir).ok();
 }

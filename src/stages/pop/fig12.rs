@@ -39,7 +39,7 @@ pub const SIGMA_S: f64 = 4.0;
 /// # Errors
 /// `g ∉ [0, 1)`.
 pub fn cube(g: f64) -> Result<VoxelMedium, String> {
-    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(SIGMA_S, 0.0, g))
+    VoxelMedium::homogeneous(DVec3::ZERO, DVec3::ONE, RgbMedium::grey(SIGMA_S, 0.0, g)).map_err(|e| e.to_string())
 }
 
 /// The Fig. 12 light: unit irradiance along `+x`.

@@ -360,7 +360,7 @@ pub fn scene_media(
                 let p = lo + size * DVec3::new(c[0] as f64 + 0.5, c[1] as f64 + 0.5, c[2] as f64 + 0.5);
                 *v *= crate::reference::volpath::flight::density_at(&m.density, p) as f32;
             }
-            VoxelMedium::new(lo, hi, r.dims, values, coefficients)?
+            VoxelMedium::new(lo, hi, r.dims, values, coefficients).map_err(|e| e.to_string())?
         }
         None => {
             let ext = hi - lo;
@@ -368,7 +368,8 @@ pub fn scene_media(
             let dims = [0, 1, 2].map(|a| ((ext[a] / cell).round() as usize).max(1));
             VoxelMedium::from_fn(lo, hi, dims, coefficients, |p| {
                 crate::reference::volpath::flight::density_at(&m.density, p)
-            })?
+            })
+            .map_err(|e| e.to_string())?
         }
     };
     Ok(SceneMedia {

@@ -130,7 +130,7 @@ impl PopRender {
         // The residuum on a thick, nearly conservative cube.
         let n = table.def.grid.map(|v| v as usize);
         let medium = VoxelMedium::homogeneous(glam::DVec3::ZERO, glam::DVec3::ONE, RgbMedium::grey(20.0, 0.02, 0.95))
-            .map_err(fail)?;
+            .map_err(|e| fail(e.to_string()))?;
         let light = crate::stages::pop::fig12::light();
         let grid = Grid::new(&medium, light.direction, n, &NoOccluder).map_err(fail)?;
         let (mut settings, flow) = settings_for(&table, &grid);

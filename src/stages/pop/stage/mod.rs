@@ -387,9 +387,9 @@ impl PopRender {
         };
         let raw = if !self.density_slices.is_empty() {
             let (dims, values) = crate::render::voxel::read_exr_slices(&ctx.base_dir.join(&self.density_slices))
-                .map_err(|message| StageError::Input {
+                .map_err(|e| StageError::Input {
                     stage: id.into(),
-                    message,
+                    message: e.to_string(),
                     help: "give density_slices a folder of EXR images, one z slice per file in name order".into(),
                 })?;
             Some(RawDensity { dims, values })
@@ -397,8 +397,8 @@ impl PopRender {
             None
         } else {
             let dims = self.density_dims.map(|d| d as usize);
-            let values =
-                crate::render::voxel::read_raw_density(&ctx.base_dir.join(&self.density_raw), dims).map_err(fail)?;
+            let values = crate::render::voxel::read_raw_density(&ctx.base_dir.join(&self.density_raw), dims)
+                .map_err(|e| fail(e.to_string()))?;
             Some(RawDensity { dims, values })
         };
         let ordinates = self.environment_ordinates as usize;
