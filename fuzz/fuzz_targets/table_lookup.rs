@@ -11,8 +11,9 @@ use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
 use voltab::container::{ReadLimits, VtabReader};
+use voltab::physics::medium::HomogeneousMedium;
 use voltab::tables::ms_lobes::{LobeQuery, MsLobesTable};
-use voltab::tables::zh_response::{Emitter, Medium, QueryOptions, Receiver, ZhResponseTable};
+use voltab::tables::zh_response::{Emitter, QueryOptions, Receiver, ZhResponseTable};
 
 #[global_allocator]
 static ALLOC: mem::Counting = mem::Counting;
@@ -34,7 +35,7 @@ fn look_up(data: &[u8], declared: &mut u64) {
         let Ok(t) = ZhResponseTable::from_reader(r, name, None, None) else { return };
         let receiver = Receiver { position: [0.0, 0.0, 1.0], normal: [0.0, 0.0, -1.0] };
         for g in [-0.95, 0.0, 0.3, 0.95] {
-            let medium = Medium { sigma_s: 1.0, sigma_a: 0.1, g };
+            let medium = HomogeneousMedium { sigma_s: 1.0, sigma_a: 0.1, g };
             let emitters = [
                 Emitter::Point { intensity: 1.0, position: [0.0, 0.0, 0.0] },
                 Emitter::Directional { irradiance: 1.0, toward_light: [0.0, 0.0, -1.0], depth: 2.0 },
