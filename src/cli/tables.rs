@@ -61,7 +61,7 @@ pub fn verify(a: VerifyArgs) -> Result<ExitCode> {
     for f in &files {
         let checked = VtabReader::open(f).map_err(|e| e.to_string()).and_then(|mut r| {
             let rep = r.verify().map_err(|e| e.to_string())?;
-            voltab::tables::check_known_kind(r.header())?;
+            voltab::tables::check_known_kind(r.header()).map_err(|e| e.to_string())?;
             Ok(rep)
         });
         match checked {

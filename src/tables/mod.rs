@@ -375,55 +375,91 @@ pub fn check_kind<E>(
             h.kind_schema_version
         )));
     }
-    let def = stored_definition(h, kind).map_err(layout)?;
+    let def = stored_definition(h, kind).map_err(|e| layout(e.to_string()))?;
     Ok((r, def))
+}
+
+/// A table file whose header this build cannot trust or read.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StoredTableError {
+    /// The stored definition does not parse as the kind's definition.
+    #[error("its stored definition is not a readable {0} definition")]
+    Unreadable(String),
+    /// The stored definition is of another kind than the header says.
+    #[error("its stored definition is a {found} definition, not {kind}")]
+    WrongKind {
+        /// The definition's kind.
+        found: &'static str,
+        /// The header's kind.
+        kind: String,
+    },
+    /// The stored definition breaks a range rule of its kind.
+    #[error("its stored definition is invalid: {message} (field `{field}`; {help})")]
+    Invalid {
+        /// What is wrong.
+        message: String,
+        /// The field.
+        field: &'static str,
+        /// The fix.
+        help: String,
+    },
+    /// Reading the table would need more memory than this machine allows.
+    #[error("its stored definition would need {bytes} bytes of memory, above this machine's limit of {limit}")]
+    TooLarge {
+        /// Bytes needed.
+        bytes: u128,
+        /// This machine's limit.
+        limit: u128,
+    },
+    /// A kind this build does not know.
+    #[error("unknown table kind `{kind}`: voltab {} reads {}; upgrade voltab to use this table", env!("CARGO_PKG_VERSION"), TableDecl::KINDS.join(", "))]
+    UnknownKind {
+        /// The file's kind.
+        kind: String,
+    },
+    /// A layout newer than this build reads.
+    #[error("{kind} layout version {version} is newer than the {supported} this voltab {} reads; upgrade voltab", env!("CARGO_PKG_VERSION"))]
+    NewerLayout {
+        /// The kind.
+        kind: String,
+        /// The file's layout version.
+        version: u32,
+        /// The newest this build reads.
+        supported: u32,
+    },
 }
 
 /// Parses a table header's stored definition and validates it exactly as a pipeline's table is
 /// validated (same [`TableKind::validate`], same memory estimate): a file whose definition was
 /// edited (`z_min > z_max`, `g: [NaN]`, `rho_max: 0`, …) is refused with the first broken rule
 /// instead of reaching a reader that trusts it (issue 37).
-pub fn stored_definition(h: &crate::container::Header, kind: &str) -> Result<TableDef, String> {
-    let def = ron::from_str::<TableDef>(&h.definition_ron)
-        .map_err(|_| format!("its stored definition is not a readable {kind} definition"))?;
+pub fn stored_definition(h: &crate::container::Header, kind: &str) -> Result<TableDef, StoredTableError> {
+    let def = ron::from_str::<TableDef>(&h.definition_ron).map_err(|_| StoredTableError::Unreadable(kind.into()))?;
     if def.kind() != kind {
-        return Err(format!("its stored definition is a {} definition, not {kind}", def.kind()));
+        return Err(StoredTableError::WrongKind { found: def.kind(), kind: kind.into() });
     }
     if let Some(i) = def.kind_impl().validate().first() {
-        return Err(format!("its stored definition is invalid: {} (field `{}`; {})", i.message, i.field, i.help));
+        return Err(StoredTableError::Invalid { message: i.message.clone(), field: i.field, help: i.help.clone() });
     }
     let limit = crate::pipeline::Limits::from_machine().memory_bytes;
-    if def.kind_impl().estimated_bytes() > limit {
-        return Err(format!(
-            "its stored definition would need {} bytes of memory, above this machine's limit of {limit}",
-            def.kind_impl().estimated_bytes()
-        ));
+    let bytes = def.kind_impl().estimated_bytes();
+    if bytes > limit {
+        return Err(StoredTableError::TooLarge { bytes, limit });
     }
     Ok(def)
 }
 
 /// Checks that a table's kind and layout version are ones this build can consume.
-pub fn check_known_kind(h: &crate::container::Header) -> Result<(), String> {
+pub fn check_known_kind(h: &crate::container::Header) -> Result<(), StoredTableError> {
     let supported = match h.kind.as_str() {
         k if k == phase_hg::PhaseHgRaw::KIND => phase_hg::KIND_SCHEMA_VERSION,
         k if k == zh_response::ZhResponseRaw::KIND => zh_response::KIND_SCHEMA_VERSION,
         k if k == ms_lobes::MsLobesRaw::KIND => ms_lobes::KIND_SCHEMA_VERSION,
         k if k == pop_preset::PopPresetRaw::KIND => pop_preset::KIND_SCHEMA_VERSION,
-        other => {
-            return Err(format!(
-                "unknown table kind `{other}`: voltab {} reads {}; upgrade voltab to use this table",
-                env!("CARGO_PKG_VERSION"),
-                TableDecl::KINDS.join(", ")
-            ));
-        }
+        other => return Err(StoredTableError::UnknownKind { kind: other.into() }),
     };
     if h.kind_schema_version > supported {
-        return Err(format!(
-            "{} layout version {} is newer than the {supported} this voltab {} reads; upgrade voltab",
-            h.kind,
-            h.kind_schema_version,
-            env!("CARGO_PKG_VERSION")
-        ));
+        return Err(StoredTableError::NewerLayout { kind: h.kind.clone(), version: h.kind_schema_version, supported });
     }
     stored_definition(h, &h.kind).map(|_| ())
 }
