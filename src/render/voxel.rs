@@ -47,7 +47,7 @@ pub enum VoxelError {
     #[error("voxel dimensions {0:?} contain 0; every axis needs at least one voxel")]
     ZeroDims([usize; 3]),
     /// The density count does not match the dimensions.
-    #[error("{got} densities for {dims:?} voxels; the volume needs {} (x fastest, then y, then z)", dims.iter().product::<usize>())]
+    #[error("{got} densities for {dims:?} voxels; the volume needs {} (x fastest, then y, then z)", voxel_count(*dims))]
     Count {
         /// Densities given.
         got: usize,
@@ -91,15 +91,18 @@ pub enum VoxelError {
         source: std::io::Error,
     },
     /// A raw volume of the wrong size.
-    #[error("{}: {bytes} bytes, but {dims:?} voxels of little-endian f32 need {}; check `dims` or the file", path.display(), 4 * dims.iter().product::<usize>())]
+    #[error("{}: {bytes} bytes, but {dims:?} voxels of little-endian f32 need {}; check `dims` or the file", path.display(), voxel_count(*dims).saturating_mul(4))]
     RawSize {
         /// The file.
         path: std::path::PathBuf,
         /// Its size.
-        bytes: usize,
+        bytes: u64,
         /// Voxels per axis.
         dims: [usize; 3],
     },
+    /// A device, pipe or folder where a raw volume file belongs.
+    #[error("{}: not a regular file; give density_raw a file of little-endian f32 densities", .0.display())]
+    NotAFile(std::path::PathBuf),
     /// A slice folder without `.exr` files.
     #[error("{}: no .exr slices in the folder; put one EXR per z slice there", .0.display())]
     NoSlices(std::path::PathBuf),
@@ -283,18 +286,29 @@ pub(crate) fn unit_cube(coefficients: RgbMedium) -> VoxelMedium {
 /// Reads a raw little-endian `f32` density volume of `dims` voxels (x fastest).
 ///
 /// # Errors
-/// A message naming the file: missing or unreadable, or a size that is not `4 · x · y · z` bytes.
+/// Naming the file: missing or unreadable, not a regular file, or a size that is not `4 · x · y · z`
+/// bytes (checked before reading).
 pub fn read_raw_density(path: &Path, dims: [usize; 3]) -> Result<Vec<f32>, VoxelError> {
-    let bytes = std::fs::read(path).map_err(|source| VoxelError::Io {
-        path: path.to_path_buf(),
-        what: "density volume",
-        source,
-    })?;
-    let n: usize = dims.iter().product();
-    if bytes.len() != n * 4 {
-        return Err(VoxelError::RawSize { path: path.to_path_buf(), bytes: bytes.len(), dims });
+    let io = |source| VoxelError::Io { path: path.to_path_buf(), what: "density volume", source };
+    let wrong_size = |bytes: u64| VoxelError::RawSize { path: path.to_path_buf(), bytes, dims };
+    // The size is checked before anything is read, so a device or a huge file is never slurped.
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() {
+        return Err(VoxelError::NotAFile(path.to_path_buf()));
+    }
+    if u128::from(meta.len()) != voxel_count(dims).saturating_mul(4) {
+        return Err(wrong_size(meta.len()));
+    }
+    let bytes = std::fs::read(path).map_err(io)?;
+    if voxel_count(dims).saturating_mul(4) != bytes.len() as u128 {
+        return Err(wrong_size(bytes.len() as u64));
     }
     Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+}
+
+/// Voxels of a volume of `dims`, without overflow (saturating far beyond any real volume).
+fn voxel_count(dims: [usize; 3]) -> u128 {
+    dims.iter().fold(1u128, |n, &d| n.saturating_mul(d as u128))
 }
 
 /// Largest slice count and slice side of an EXR-slice volume.

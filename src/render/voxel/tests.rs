@@ -83,5 +83,12 @@ fn raw_volume_round_trip_and_size_check() {
     let e = e.to_string();
     assert!(e.contains("d.raw") && e.contains("32"), "{e}");
     assert!(read_raw_density(&dir.join("missing.raw"), [1, 1, 1]).unwrap_err().to_string().contains("missing.raw"));
+    // Declared sizes beyond memory, a folder and a device are refused before anything is read.
+    let e = read_raw_density(&p, [usize::MAX; 3]).unwrap_err();
+    assert!(matches!(e, VoxelError::RawSize { bytes: 16, .. }), "{e}");
+    assert!(matches!(read_raw_density(&dir, [1, 1, 1]), Err(VoxelError::NotAFile(_))));
+    assert!(matches!(read_raw_density(Path::new("/dev/zero"), [1, 1, 1]), Err(VoxelError::NotAFile(_))));
+    let e = VoxelMedium::new(DVec3::ZERO, DVec3::ONE, [usize::MAX; 3], vec![1.0], coeffs()).unwrap_err();
+    assert!(matches!(e, VoxelError::Count { got: 1, .. }), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
